@@ -1,0 +1,491 @@
+//! The capsule/scanner/controller configuration (TOML), in SI units.
+//!
+//! Parsing is strict (`deny_unknown_fields`): a misspelt key is an error, not a
+//! silently ignored value. [`Config::validate`] checks every physical value and
+//! names the offending field and its allowed range in the error.
+
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The embedded default: Table I of the paper with the product's controller.
+pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../configs/paper.toml");
+
+/// Largest number of capsules a config may describe (the emitted solver is
+/// fixed-size; more capsules than this is almost certainly a typo).
+pub const MAX_CAPSULES: usize = 8;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// One entry per capsule, M >= 1.
+    pub capsule: Vec<CapsuleConfig>,
+    pub fluid: FluidConfig,
+    pub drag: DragConfig,
+    pub scanner: ScannerConfig,
+    pub controller: ControllerConfig,
+    #[serde(default)]
+    pub grid: GridConfig,
+    #[serde(default)]
+    pub disturbance: DisturbanceConfig,
+    #[serde(default)]
+    pub measurement: MeasurementConfig,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CapsuleConfig {
+    #[serde(default)]
+    pub name: String,
+    /// Radius of the ferrous sphere, m.
+    pub sphere_radius_m: f64,
+    /// Outer radius of the capsule (sets the frontal area for drag), m.
+    pub capsule_radius_m: f64,
+    /// Density of the ferrous sphere, kg/m^3.
+    pub sphere_density_kg_per_m3: f64,
+    /// Saturation magnetization of the sphere, A/m.
+    pub saturation_magnetization_a_per_m: f64,
+    /// Mass of the shell and payload, added to the sphere's mass, kg.
+    #[serde(default)]
+    pub shell_mass_kg: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FluidConfig {
+    pub density_kg_per_m3: f64,
+    pub dynamic_viscosity_pa_s: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DragLaw {
+    /// F = 1/2 rho C_d A v|v| with a constant C_d (the paper's model).
+    Quadratic,
+    /// C_d(Re) from the Clift-Gauvin sphere correlation: Stokes drag at low
+    /// Reynolds number, Newton regime at high.
+    SphereCorrelation,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DragConfig {
+    pub law: DragLaw,
+    /// Constant drag coefficient for the `quadratic` law (dimensionless).
+    #[serde(default = "default_drag_coefficient")]
+    pub drag_coefficient: f64,
+}
+
+fn default_drag_coefficient() -> f64 {
+    0.47
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScannerConfig {
+    /// Largest gradient magnitude |u|, T/m.
+    pub max_gradient_t_per_m: f64,
+    /// Duration of one tracking phase (u = 0 while tracking), s.
+    pub tracking_time_s: f64,
+    /// Compute/transfer delay after tracking before a measurement is usable, s.
+    #[serde(default)]
+    pub extra_delay_s: f64,
+    /// Gradient slew-rate limit, T/m/s (None: ideal steps).
+    #[serde(default)]
+    pub slew_rate_t_per_m_per_s: Option<f64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preset {
+    /// Long-horizon plans from offline tables, refined online.
+    Default,
+    /// The paper's NMPC taken literally: horizon N only, shifted warm start.
+    Paper,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CostUnits {
+    /// Weights apply to states in m, m/s.
+    Si,
+    /// Weights apply to states in cm, cm/s (the paper's reading).
+    Cm,
+}
+
+impl CostUnits {
+    /// Factor that converts an SI length into the cost's length unit.
+    pub fn length_scale(self) -> f64 {
+        match self {
+            CostUnits::Si => 1.0,
+            CostUnits::Cm => 100.0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerConfig {
+    pub preset: Preset,
+    /// Controller sample (zero-order-hold) time, s.
+    pub sample_time_s: f64,
+    /// Online refinement window N (inputs re-optimized every step).
+    pub horizon_steps: usize,
+    /// Length K of the long plans stored in the tables (>= N).
+    pub plan_steps: usize,
+    /// RK4 sub-steps per sample in the controller's model.
+    pub rk4_substeps: usize,
+    pub cost_units: CostUnits,
+    /// Stage weights on [x1, v1, x2, v2, ...] in `cost_units`.
+    pub q: Vec<f64>,
+    /// Input weight, per (T/m)^2.
+    pub r: f64,
+    /// Terminal weights on the state in `cost_units`.
+    pub p: Vec<f64>,
+    /// State bound alpha on each position error, m.
+    pub position_bound_m: f64,
+    /// State bound alpha on each speed, m/s.
+    pub speed_bound_m_per_s: f64,
+    /// Online SQP iterations per control step.
+    #[serde(default = "default_sqp_iterations")]
+    pub sqp_iterations: usize,
+    /// sigma of the switching rule (17), 0 < sigma < 1.
+    #[serde(default = "default_sigma")]
+    pub switching_sigma: f64,
+}
+
+fn default_sqp_iterations() -> usize {
+    2
+}
+fn default_sigma() -> f64 {
+    0.5
+}
+
+/// The generator's grid over target-relative positions (tables are built for
+/// starts at rest at every grid point; see the generator docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridConfig {
+    /// Half-width of the grid in each relative position, m.
+    pub position_range_m: f64,
+    /// Grid spacing, m.
+    pub position_step_m: f64,
+    /// Number of starting guesses per grid point for the offline solver.
+    pub starts: usize,
+    /// SQP iterations per start.
+    pub sqp_iterations: usize,
+}
+
+impl Default for GridConfig {
+    fn default() -> Self {
+        GridConfig {
+            position_range_m: 0.04,
+            position_step_m: 0.005,
+            starts: 12,
+            sqp_iterations: 40,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DisturbanceKind {
+    None,
+    /// Piecewise-constant random vector, redrawn every controller sample,
+    /// uniform in the ball of radius `bound`.
+    Random,
+    /// A constant vector of norm `bound` (worst-case bias), direction from the seed.
+    Constant,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DisturbanceConfig {
+    /// Bound on ||d|| (Euclidean, on the state derivative).
+    pub bound: f64,
+    /// Units of `bound`: "cm" reads it as cm/s and cm/s^2 (the paper's), "si" as m/s, m/s^2.
+    pub units: CostUnits,
+    pub kind: DisturbanceKind,
+    pub seed: u64,
+}
+
+impl Default for DisturbanceConfig {
+    fn default() -> Self {
+        DisturbanceConfig {
+            bound: 0.0,
+            units: CostUnits::Si,
+            kind: DisturbanceKind::None,
+            seed: 1,
+        }
+    }
+}
+
+impl DisturbanceConfig {
+    /// The bound in SI units (m/s and m/s^2).
+    pub fn bound_si(&self) -> f64 {
+        self.bound / self.units.length_scale()
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeasurementConfig {
+    /// Standard deviation of the tracked positions, m.
+    pub position_noise_m: f64,
+}
+
+impl Default for MeasurementConfig {
+    fn default() -> Self {
+        MeasurementConfig {
+            position_noise_m: 2.0e-4,
+        }
+    }
+}
+
+/// A config error: which field, and what is wrong with it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read config file {path}: {reason}")]
+    Io { path: String, reason: String },
+    #[error("config: {0}")]
+    Parse(String),
+    #[error("config field `{field}`: {reason}")]
+    Invalid { field: String, reason: String },
+}
+
+fn invalid(field: impl Into<String>, reason: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
+        field: field.into(),
+        reason: reason.into(),
+    }
+}
+
+/// `value` must be finite and in `[lo, hi]` (with `lo_open` making it `(lo, hi]`).
+fn check_range(field: &str, value: f64, lo: f64, lo_open: bool, hi: f64) -> Result<(), ConfigError> {
+    let lower_ok = if lo_open { value > lo } else { value >= lo };
+    if !value.is_finite() || !lower_ok || value > hi {
+        let open = if lo_open { "(" } else { "[" };
+        return Err(invalid(
+            field,
+            format!("{value} is outside the allowed range {open}{lo:e}, {hi:e}]"),
+        ));
+    }
+    Ok(())
+}
+
+impl Config {
+    /// Parses and validates TOML text.
+    pub fn from_toml_str(text: &str) -> Result<Config, ConfigError> {
+        let config: Config = toml::from_str(text).map_err(|e| {
+            // toml's message already names the key; keep it on one line.
+            ConfigError::Parse(e.message().replace('\n', " ").trim().to_string()
+                + &e
+                    .span()
+                    .map(|s| format!(" (at byte {})", s.start))
+                    .unwrap_or_default())
+        })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Reads, parses and validates a TOML file.
+    pub fn from_file(path: &Path) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Io {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        Config::from_toml_str(&text)
+    }
+
+    /// The embedded default config.
+    pub fn embedded_default() -> Config {
+        Config::from_toml_str(DEFAULT_CONFIG_TOML).expect("embedded default config is valid")
+    }
+
+    /// Number of capsules M.
+    pub fn capsule_count(&self) -> usize {
+        self.capsule.len()
+    }
+
+    /// Number of states 2M: [x1, v1, x2, v2, ...].
+    pub fn state_count(&self) -> usize {
+        2 * self.capsule.len()
+    }
+
+    /// Checks every value; the error names the field and its allowed range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let m = self.capsule.len();
+        if m == 0 || m > MAX_CAPSULES {
+            return Err(invalid(
+                "capsule",
+                format!("{m} capsules given; between 1 and {MAX_CAPSULES} are allowed"),
+            ));
+        }
+        for (i, c) in self.capsule.iter().enumerate() {
+            let f = |name: &str| format!("capsule[{i}].{name}");
+            check_range(&f("sphere_radius_m"), c.sphere_radius_m, 0.0, true, 0.05)?;
+            check_range(&f("capsule_radius_m"), c.capsule_radius_m, 0.0, true, 0.05)?;
+            if c.capsule_radius_m < c.sphere_radius_m {
+                return Err(invalid(
+                    f("capsule_radius_m"),
+                    format!(
+                        "{} m is smaller than the sphere it holds (sphere_radius_m = {} m)",
+                        c.capsule_radius_m, c.sphere_radius_m
+                    ),
+                ));
+            }
+            check_range(&f("sphere_density_kg_per_m3"), c.sphere_density_kg_per_m3, 0.0, true, 1e5)?;
+            check_range(
+                &f("saturation_magnetization_a_per_m"),
+                c.saturation_magnetization_a_per_m,
+                0.0,
+                true,
+                1e7,
+            )?;
+            check_range(&f("shell_mass_kg"), c.shell_mass_kg, 0.0, false, 1.0)?;
+        }
+        check_range("fluid.density_kg_per_m3", self.fluid.density_kg_per_m3, 0.0, true, 1e5)?;
+        check_range("fluid.dynamic_viscosity_pa_s", self.fluid.dynamic_viscosity_pa_s, 0.0, true, 1e3)?;
+        check_range("drag.drag_coefficient", self.drag.drag_coefficient, 0.0, true, 100.0)?;
+
+        let s = &self.scanner;
+        check_range("scanner.max_gradient_t_per_m", s.max_gradient_t_per_m, 0.0, true, 1.0)?;
+        check_range("scanner.tracking_time_s", s.tracking_time_s, 0.0, true, 1.0)?;
+        check_range("scanner.extra_delay_s", s.extra_delay_s, 0.0, false, 1.0)?;
+        if let Some(slew) = s.slew_rate_t_per_m_per_s {
+            check_range("scanner.slew_rate_t_per_m_per_s", slew, 0.0, true, 1e6)?;
+        }
+
+        let c = &self.controller;
+        check_range("controller.sample_time_s", c.sample_time_s, 0.0, true, 1.0)?;
+        if !(1..=64).contains(&c.horizon_steps) {
+            return Err(invalid(
+                "controller.horizon_steps",
+                format!("{} is outside the allowed range [1, 64]", c.horizon_steps),
+            ));
+        }
+        if c.plan_steps < c.horizon_steps || c.plan_steps > 400 {
+            return Err(invalid(
+                "controller.plan_steps",
+                format!(
+                    "{} must be in [horizon_steps = {}, 400]",
+                    c.plan_steps, c.horizon_steps
+                ),
+            ));
+        }
+        if !(1..=100).contains(&c.rk4_substeps) {
+            return Err(invalid(
+                "controller.rk4_substeps",
+                format!("{} is outside the allowed range [1, 100]", c.rk4_substeps),
+            ));
+        }
+        if !(1..=50).contains(&c.sqp_iterations) {
+            return Err(invalid(
+                "controller.sqp_iterations",
+                format!("{} is outside the allowed range [1, 50]", c.sqp_iterations),
+            ));
+        }
+        for (name, weights) in [("controller.q", &c.q), ("controller.p", &c.p)] {
+            if weights.len() != 2 * m {
+                return Err(invalid(
+                    name,
+                    format!("has {} entries; 2 x capsules = {} are needed", weights.len(), 2 * m),
+                ));
+            }
+            for (k, w) in weights.iter().enumerate() {
+                check_range(&format!("{name}[{k}]"), *w, 0.0, false, 1e12)?;
+            }
+        }
+        check_range("controller.r", c.r, 0.0, true, 1e12)?;
+        check_range("controller.position_bound_m", c.position_bound_m, 0.0, true, 10.0)?;
+        check_range("controller.speed_bound_m_per_s", c.speed_bound_m_per_s, 0.0, true, 100.0)?;
+        check_range("controller.switching_sigma", c.switching_sigma, 0.0, true, 1.0)?;
+        if c.switching_sigma >= 1.0 {
+            return Err(invalid("controller.switching_sigma", "must be < 1 (condition 18)"));
+        }
+
+        let g = &self.grid;
+        check_range("grid.position_range_m", g.position_range_m, 0.0, true, c.position_bound_m)?;
+        check_range("grid.position_step_m", g.position_step_m, 0.0, true, g.position_range_m)?;
+        if 2.0 * g.position_range_m / g.position_step_m > 200.0 {
+            return Err(invalid(
+                "grid.position_step_m",
+                "gives more than 201 points per axis; use a larger step",
+            ));
+        }
+        if !(1..=256).contains(&g.starts) {
+            return Err(invalid("grid.starts", format!("{} is outside [1, 256]", g.starts)));
+        }
+        if !(1..=500).contains(&g.sqp_iterations) {
+            return Err(invalid(
+                "grid.sqp_iterations",
+                format!("{} is outside [1, 500]", g.sqp_iterations),
+            ));
+        }
+
+        check_range("disturbance.bound", self.disturbance.bound, 0.0, false, 1e3)?;
+        check_range(
+            "measurement.position_noise_m",
+            self.measurement.position_noise_m,
+            0.0,
+            false,
+            0.1,
+        )?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with(edit: impl Fn(&str) -> String) -> Result<Config, ConfigError> {
+        Config::from_toml_str(&edit(DEFAULT_CONFIG_TOML))
+    }
+
+    #[test]
+    fn embedded_default_parses() {
+        let c = Config::embedded_default();
+        assert_eq!(c.capsule_count(), 2);
+    }
+
+    #[test]
+    fn negative_radius_names_the_field() {
+        let e = with(|t| t.replacen("sphere_radius_m = 0.0015", "sphere_radius_m = -0.0015", 1)).unwrap_err();
+        assert!(e.to_string().contains("capsule[0].sphere_radius_m"), "{e}");
+    }
+
+    #[test]
+    fn capsule_smaller_than_sphere_is_refused() {
+        let e = with(|t| t.replacen("capsule_radius_m = 0.0045", "capsule_radius_m = 0.001", 1)).unwrap_err();
+        assert!(e.to_string().contains("capsule[0].capsule_radius_m"), "{e}");
+    }
+
+    #[test]
+    fn nan_is_refused() {
+        let e = with(|t| t.replacen("density_kg_per_m3 = 1000.0", "density_kg_per_m3 = nan", 1)).unwrap_err();
+        assert!(e.to_string().contains("fluid.density_kg_per_m3"), "{e}");
+    }
+
+    #[test]
+    fn unknown_field_is_named() {
+        let e = with(|t| t.replacen("[fluid]", "[fluid]\ntemperature_k = 310.0", 1)).unwrap_err();
+        assert!(e.to_string().contains("temperature_k"), "{e}");
+    }
+
+    #[test]
+    fn zero_capsules_is_refused() {
+        let text: String = DEFAULT_CONFIG_TOML
+            .split("[fluid]")
+            .nth(1)
+            .map(|rest| format!("capsule = []\n[fluid]{rest}"))
+            .unwrap();
+        let e = Config::from_toml_str(&text).unwrap_err();
+        assert!(e.to_string().contains("`capsule`"), "{e}");
+    }
+
+    #[test]
+    fn weight_count_must_match_states() {
+        let e = with(|t| t.replacen("q = [0.02, 0.001, 0.02, 0.001]", "q = [0.02]", 1)).unwrap_err();
+        assert!(e.to_string().contains("controller.q"), "{e}");
+    }
+}
