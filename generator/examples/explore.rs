@@ -1,7 +1,10 @@
 use capsule_mpc_generator::{config::Config, model::Model, ocp::Ocp};
 use rand::{Rng, SeedableRng};
 fn main() {
-    let args: Vec<f64> = std::env::args().skip(1).map(|a| a.parse().unwrap()).collect();
+    let args: Vec<f64> = std::env::args()
+        .skip(1)
+        .map(|a| a.parse().unwrap())
+        .collect();
     let mut cfg = Config::embedded_default();
     let k = args[2] as usize;
     cfg.controller.q = vec![args[3], args[4], args[3], args[4]];
@@ -18,14 +21,38 @@ fn main() {
         while i < k {
             let len = rng.gen_range(2..12);
             let lvl = rng.gen_range(-1.0..1.0) * 0.04;
-            for j in i..(i + len).min(k) { u[j] = lvl; }
+            for j in i..(i + len).min(k) {
+                u[j] = lvl;
+            }
             i += len;
         }
         let p = ocp.solve(&e0, &u, 60);
-        println!("start {s}: cost {:.5} final err {:.2} mm it {}", p.cost, p.final_position_error_m()*1e3, p.iterations);
-        if best.as_ref().map_or(true, |b| p.cost < b.cost) { best = Some(p); }
+        println!(
+            "start {s}: cost {:.5} final err {:.2} mm it {}",
+            p.cost,
+            p.final_position_error_m() * 1e3,
+            p.iterations
+        );
+        if best.as_ref().map_or(true, |b| p.cost < b.cost) {
+            best = Some(p);
+        }
     }
     let b = best.unwrap();
-    println!("time {:?}; best cost {:.5} final {:?}", t.elapsed(), b.cost, b.states.last());
-    for (k, (u, s)) in b.u.iter().zip(&b.states).enumerate() { if k % 5 == 0 { println!("{k:3} u={:+.4} e={:?}", u, s.iter().map(|v| (v*1000.0).round()/1000.0*100.0).collect::<Vec<_>>()); } }
+    println!(
+        "time {:?}; best cost {:.5} final {:?}",
+        t.elapsed(),
+        b.cost,
+        b.states.last()
+    );
+    for (k, (u, s)) in b.u.iter().zip(&b.states).enumerate() {
+        if k % 5 == 0 {
+            println!(
+                "{k:3} u={:+.4} e={:?}",
+                u,
+                s.iter()
+                    .map(|v| (v * 1000.0).round() / 1000.0 * 100.0)
+                    .collect::<Vec<_>>()
+            );
+        }
+    }
 }

@@ -260,7 +260,13 @@ fn invalid(field: impl Into<String>, reason: impl Into<String>) -> ConfigError {
 }
 
 /// `value` must be finite and in `[lo, hi]` (with `lo_open` making it `(lo, hi]`).
-fn check_range(field: &str, value: f64, lo: f64, lo_open: bool, hi: f64) -> Result<(), ConfigError> {
+fn check_range(
+    field: &str,
+    value: f64,
+    lo: f64,
+    lo_open: bool,
+    hi: f64,
+) -> Result<(), ConfigError> {
     let lower_ok = if lo_open { value > lo } else { value >= lo };
     if !value.is_finite() || !lower_ok || value > hi {
         let open = if lo_open { "(" } else { "[" };
@@ -277,11 +283,12 @@ impl Config {
     pub fn from_toml_str(text: &str) -> Result<Config, ConfigError> {
         let config: Config = toml::from_str(text).map_err(|e| {
             // toml's message already names the key; keep it on one line.
-            ConfigError::Parse(e.message().replace('\n', " ").trim().to_string()
-                + &e
-                    .span()
-                    .map(|s| format!(" (at byte {})", s.start))
-                    .unwrap_or_default())
+            ConfigError::Parse(
+                e.message().replace('\n', " ").trim().to_string()
+                    + &e.span()
+                        .map(|s| format!(" (at byte {})", s.start))
+                        .unwrap_or_default(),
+            )
         })?;
         config.validate()?;
         Ok(config)
@@ -333,7 +340,13 @@ impl Config {
                     ),
                 ));
             }
-            check_range(&f("sphere_density_kg_per_m3"), c.sphere_density_kg_per_m3, 0.0, true, 1e5)?;
+            check_range(
+                &f("sphere_density_kg_per_m3"),
+                c.sphere_density_kg_per_m3,
+                0.0,
+                true,
+                1e5,
+            )?;
             check_range(
                 &f("saturation_magnetization_a_per_m"),
                 c.saturation_magnetization_a_per_m,
@@ -343,12 +356,36 @@ impl Config {
             )?;
             check_range(&f("shell_mass_kg"), c.shell_mass_kg, 0.0, false, 1.0)?;
         }
-        check_range("fluid.density_kg_per_m3", self.fluid.density_kg_per_m3, 0.0, true, 1e5)?;
-        check_range("fluid.dynamic_viscosity_pa_s", self.fluid.dynamic_viscosity_pa_s, 0.0, true, 1e3)?;
-        check_range("drag.drag_coefficient", self.drag.drag_coefficient, 0.0, true, 100.0)?;
+        check_range(
+            "fluid.density_kg_per_m3",
+            self.fluid.density_kg_per_m3,
+            0.0,
+            true,
+            1e5,
+        )?;
+        check_range(
+            "fluid.dynamic_viscosity_pa_s",
+            self.fluid.dynamic_viscosity_pa_s,
+            0.0,
+            true,
+            1e3,
+        )?;
+        check_range(
+            "drag.drag_coefficient",
+            self.drag.drag_coefficient,
+            0.0,
+            true,
+            100.0,
+        )?;
 
         let s = &self.scanner;
-        check_range("scanner.max_gradient_t_per_m", s.max_gradient_t_per_m, 0.0, true, 1.0)?;
+        check_range(
+            "scanner.max_gradient_t_per_m",
+            s.max_gradient_t_per_m,
+            0.0,
+            true,
+            1.0,
+        )?;
         check_range("scanner.tracking_time_s", s.tracking_time_s, 0.0, true, 1.0)?;
         check_range("scanner.extra_delay_s", s.extra_delay_s, 0.0, false, 1.0)?;
         if let Some(slew) = s.slew_rate_t_per_m_per_s {
@@ -388,7 +425,11 @@ impl Config {
             if weights.len() != 2 * m {
                 return Err(invalid(
                     name,
-                    format!("has {} entries; 2 x capsules = {} are needed", weights.len(), 2 * m),
+                    format!(
+                        "has {} entries; 2 x capsules = {} are needed",
+                        weights.len(),
+                        2 * m
+                    ),
                 ));
             }
             for (k, w) in weights.iter().enumerate() {
@@ -396,16 +437,49 @@ impl Config {
             }
         }
         check_range("controller.r", c.r, 0.0, true, 1e12)?;
-        check_range("controller.position_bound_m", c.position_bound_m, 0.0, true, 10.0)?;
-        check_range("controller.speed_bound_m_per_s", c.speed_bound_m_per_s, 0.0, true, 100.0)?;
-        check_range("controller.switching_sigma", c.switching_sigma, 0.0, true, 1.0)?;
+        check_range(
+            "controller.position_bound_m",
+            c.position_bound_m,
+            0.0,
+            true,
+            10.0,
+        )?;
+        check_range(
+            "controller.speed_bound_m_per_s",
+            c.speed_bound_m_per_s,
+            0.0,
+            true,
+            100.0,
+        )?;
+        check_range(
+            "controller.switching_sigma",
+            c.switching_sigma,
+            0.0,
+            true,
+            1.0,
+        )?;
         if c.switching_sigma >= 1.0 {
-            return Err(invalid("controller.switching_sigma", "must be < 1 (condition 18)"));
+            return Err(invalid(
+                "controller.switching_sigma",
+                "must be < 1 (condition 18)",
+            ));
         }
 
         let g = &self.grid;
-        check_range("grid.position_range_m", g.position_range_m, 0.0, true, c.position_bound_m)?;
-        check_range("grid.position_step_m", g.position_step_m, 0.0, true, g.position_range_m)?;
+        check_range(
+            "grid.position_range_m",
+            g.position_range_m,
+            0.0,
+            true,
+            c.position_bound_m,
+        )?;
+        check_range(
+            "grid.position_step_m",
+            g.position_step_m,
+            0.0,
+            true,
+            g.position_range_m,
+        )?;
         if 2.0 * g.position_range_m / g.position_step_m > 200.0 {
             return Err(invalid(
                 "grid.position_step_m",
@@ -413,7 +487,10 @@ impl Config {
             ));
         }
         if !(1..=256).contains(&g.starts) {
-            return Err(invalid("grid.starts", format!("{} is outside [1, 256]", g.starts)));
+            return Err(invalid(
+                "grid.starts",
+                format!("{} is outside [1, 256]", g.starts),
+            ));
         }
         if !(1..=500).contains(&g.sqp_iterations) {
             return Err(invalid(
@@ -450,19 +527,22 @@ mod tests {
 
     #[test]
     fn negative_radius_names_the_field() {
-        let e = with(|t| t.replacen("sphere_radius_m = 0.0015", "sphere_radius_m = -0.0015", 1)).unwrap_err();
+        let e = with(|t| t.replacen("sphere_radius_m = 0.0015", "sphere_radius_m = -0.0015", 1))
+            .unwrap_err();
         assert!(e.to_string().contains("capsule[0].sphere_radius_m"), "{e}");
     }
 
     #[test]
     fn capsule_smaller_than_sphere_is_refused() {
-        let e = with(|t| t.replacen("capsule_radius_m = 0.0045", "capsule_radius_m = 0.001", 1)).unwrap_err();
+        let e = with(|t| t.replacen("capsule_radius_m = 0.0045", "capsule_radius_m = 0.001", 1))
+            .unwrap_err();
         assert!(e.to_string().contains("capsule[0].capsule_radius_m"), "{e}");
     }
 
     #[test]
     fn nan_is_refused() {
-        let e = with(|t| t.replacen("density_kg_per_m3 = 1000.0", "density_kg_per_m3 = nan", 1)).unwrap_err();
+        let e = with(|t| t.replacen("density_kg_per_m3 = 1000.0", "density_kg_per_m3 = nan", 1))
+            .unwrap_err();
         assert!(e.to_string().contains("fluid.density_kg_per_m3"), "{e}");
     }
 
@@ -485,7 +565,8 @@ mod tests {
 
     #[test]
     fn weight_count_must_match_states() {
-        let e = with(|t| t.replacen("q = [0.02, 0.001, 0.02, 0.001]", "q = [0.02]", 1)).unwrap_err();
+        let e =
+            with(|t| t.replacen("q = [0.02, 0.001, 0.02, 0.001]", "q = [0.02]", 1)).unwrap_err();
         assert!(e.to_string().contains("controller.q"), "{e}");
     }
 }

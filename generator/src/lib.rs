@@ -6,5 +6,8 @@
 //! solver crate (`generated/`) that the `no_std` runtime links.
 
 pub mod config;
+pub mod emit;
+pub mod generate;
 pub mod model;
 pub mod ocp;
+pub mod tables;

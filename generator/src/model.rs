@@ -25,7 +25,10 @@ pub enum Drag {
     Quadratic { b_per_m: f64 },
     /// a = -k C_d(Re) v|v| with Re = re_per_speed |v| (Clift-Gauvin correlation),
     /// k = rho A / (2 m) in 1/m, re_per_speed = rho D / mu in s/m.
-    SphereCorrelation { k_per_m: f64, re_per_speed_s_per_m: f64 },
+    SphereCorrelation {
+        k_per_m: f64,
+        re_per_speed_s_per_m: f64,
+    },
 }
 
 impl Drag {
@@ -200,7 +203,13 @@ pub struct CapsuleStep {
 
 /// RK4 over `dt_s` in `substeps` equal sub-steps with constant u, and the
 /// exact Jacobians of that discrete map (not a finite-difference estimate).
-pub fn rk4_capsule(c: &CapsuleParams, xv: [f64; 2], u: f64, dt_s: f64, substeps: usize) -> CapsuleStep {
+pub fn rk4_capsule(
+    c: &CapsuleParams,
+    xv: [f64; 2],
+    u: f64,
+    dt_s: f64,
+    substeps: usize,
+) -> CapsuleStep {
     let h = dt_s / substeps as f64;
     let mut state = xv;
     let mut a = [[1.0, 0.0], [0.0, 1.0]];
@@ -293,7 +302,11 @@ mod tests {
         for c in &m.capsules {
             assert!((c.g - 173.25).abs() / 173.25 < 1e-3, "g = {}", c.g);
         }
-        let b: Vec<f64> = m.capsules.iter().map(|c| c.drag.effective_b_per_m(0.1)).collect();
+        let b: Vec<f64> = m
+            .capsules
+            .iter()
+            .map(|c| c.drag.effective_b_per_m(0.1))
+            .collect();
         assert!((b[0] - 134.7).abs() / 134.7 < 1e-3, "b1 = {}", b[0]);
         assert!((b[1] - 16.84).abs() / 16.84 < 1e-3, "b2 = {}", b[1]);
         assert!((m.terminal_speed_m_per_s(0, 0.04) - 0.227).abs() < 1e-3);
@@ -329,14 +342,20 @@ mod tests {
                         let sq = rk4_capsule(c, q, u, 0.02, 3).next;
                         for r in 0..2 {
                             let fd = (sp[r] - sq[r]) / (2.0 * eps);
-                            assert!((fd - s.a[r][col]).abs() < 1e-6 * (1.0 + fd.abs()), "{law:?} a[{r}][{col}]");
+                            assert!(
+                                (fd - s.a[r][col]).abs() < 1e-6 * (1.0 + fd.abs()),
+                                "{law:?} a[{r}][{col}]"
+                            );
                         }
                     }
                     let sp = rk4_capsule(c, [x, v], u + eps, 0.02, 3).next;
                     let sq = rk4_capsule(c, [x, v], u - eps, 0.02, 3).next;
                     for r in 0..2 {
                         let fd = (sp[r] - sq[r]) / (2.0 * eps);
-                        assert!((fd - s.b[r]).abs() < 1e-6 * (1.0 + fd.abs()), "{law:?} b[{r}]");
+                        assert!(
+                            (fd - s.b[r]).abs() < 1e-6 * (1.0 + fd.abs()),
+                            "{law:?} b[{r}]"
+                        );
                     }
                 }
             }

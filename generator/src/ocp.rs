@@ -9,9 +9,7 @@
 use crate::config::Config;
 use crate::model::{rk4_capsule, Model};
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
-};
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus};
 use serde::{Deserialize, Serialize};
 
 /// Weights and bounds of the problem, in SI (converted once from the config's
@@ -111,7 +109,11 @@ impl<'a> Ocp<'a> {
     }
 
     pub fn stage_cost(&self, e: &[f64], u: f64) -> f64 {
-        e.iter().zip(&self.weights.q).map(|(e, q)| q * e * e).sum::<f64>() + self.weights.r * u * u
+        e.iter()
+            .zip(&self.weights.q)
+            .map(|(e, q)| q * e * e)
+            .sum::<f64>()
+            + self.weights.r * u * u
     }
 
     pub fn terminal_cost(&self, e: &[f64]) -> f64 {

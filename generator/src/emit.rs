@@ -1,0 +1,309 @@
+//! Emission of the specialized solver crate (`generated/`).
+//!
+//! Constants, the drag law and the tables are written with `quote`; the solver
+//! body comes from `templates/solver.rs`, parsed with `syn` (so a broken
+//! template fails here, not in the user's build); the whole file is formatted
+//! with `prettyplease`. Output is deterministic (no timestamps) so that
+//! `generate --check` can compare bytes.
+
+use crate::config::{Config, Preset};
+use crate::model::{Drag, Model};
+use crate::ocp::OcpWeights;
+use crate::tables::{hex, Axis, Tables};
+use proc_macro2::{Literal, TokenStream};
+use quote::{format_ident, quote};
+
+const SOLVER_TEMPLATE: &str = include_str!("../templates/solver.rs");
+const LIB_TEMPLATE: &str = include_str!("../templates/lib.rs");
+
+/// Active-set iterations allowed per window QP (each iteration adds or drops
+/// one bound, so 3N covers every practical sequence; the generator checks the
+/// measured maximum over the grid against it).
+pub fn qp_max_iterations(horizon: usize) -> usize {
+    3 * horizon
+}
+
+/// A float literal that round-trips exactly; refuses non-finite values.
+fn float(name: &str, v: f64) -> Result<Literal, EmitError> {
+    if !v.is_finite() {
+        return Err(EmitError::NonFinite {
+            name: name.to_string(),
+            value: v,
+        });
+    }
+    Ok(Literal::f64_unsuffixed(v))
+}
+
+fn floats(name: &str, vs: &[f64]) -> Result<Vec<Literal>, EmitError> {
+    vs.iter().map(|&v| float(name, v)).collect()
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum EmitError {
+    #[error("cannot emit `{name}`: value {value} is not finite")]
+    NonFinite { name: String, value: f64 },
+    #[error("emitted code does not parse: {0}")]
+    Parse(String),
+}
+
+/// Everything a generated module needs: config, model, tables (None for
+/// the paper preset, which has no tables).
+pub struct EmitInput<'a> {
+    pub config: &'a Config,
+    pub tables: Option<&'a Tables>,
+    pub config_hash: [u8; 32],
+    /// Largest QP iteration count measured offline over the grid.
+    pub measured_qp_iterations: usize,
+}
+
+fn axis_tokens(name: &str, a: &Axis) -> Result<TokenStream, EmitError> {
+    let start = float(name, a.start)?;
+    let step = float(name, a.step)?;
+    let count = a.count;
+    Ok(quote! { Axis { start: #start, step: #step, count: #count } })
+}
+
+fn drag_arm(i: usize, drag: &Drag) -> Result<TokenStream, EmitError> {
+    Ok(match *drag {
+        Drag::Quadratic { b_per_m } => {
+            let b = float("b_per_m", b_per_m)?;
+            quote! { #i => { let s = v.abs(); (-#b * v * s, -2.0 * #b * s) } }
+        }
+        Drag::SphereCorrelation {
+            k_per_m,
+            re_per_speed_s_per_m,
+        } => {
+            let k = float("k_per_m", k_per_m)?;
+            let c = float("re_per_speed_s_per_m", re_per_speed_s_per_m)?;
+            // Clift-Gauvin: h(s) = C_d(c s) s^2, written to be finite at s = 0.
+            quote! {
+                #i => {
+                    let s = v.abs();
+                    let sign = if v < 0.0 { -1.0 } else { 1.0 };
+                    let c: f64 = #c;
+                    let cp = libm::pow(c, 0.687);
+                    let t1 = 24.0 / c * (s + 0.15 * cp * libm::pow(s, 1.687));
+                    let dt1 = 24.0 / c * (1.0 + 0.15 * 1.687 * cp * libm::pow(s, 0.687));
+                    let (t2, dt2) = if s > 0.0 {
+                        let w = 42500.0 * libm::pow(c * s, -1.16);
+                        (0.42 * s * s / (1.0 + w),
+                         0.42 * (2.0 * s * (1.0 + w) + 1.16 * s * w) / ((1.0 + w) * (1.0 + w)))
+                    } else { (0.0, 0.0) };
+                    (-#k * sign * (t1 + t2), -#k * (dt1 + dt2))
+                }
+            }
+        }
+    })
+}
+
+/// The source of one generated controller module.
+pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
+    let config = input.config;
+    let model = Model::from_config(config);
+    let w = OcpWeights::from_config(config);
+    let c = &config.controller;
+    let m = model.capsule_count();
+    let nx = 2 * m;
+    let n = c.horizon_steps;
+    let k = c.plan_steps;
+    let dt = float("sample_time_s", c.sample_time_s)?;
+    let substeps = c.rk4_substeps;
+    let u_max = float("max_gradient_t_per_m", model.u_max_t_per_m)?;
+    let g = floats("g", &model.capsules.iter().map(|c| c.g).collect::<Vec<_>>())?;
+    let q = floats("q", &w.q)?;
+    let r = float("r", w.r)?;
+    let p = floats("p", &w.p)?;
+    let pos_bound = float("position_bound_m", c.position_bound_m)?;
+    let speed_bound = float("speed_bound_m_per_s", c.speed_bound_m_per_s)?;
+    let sqp = c.sqp_iterations;
+    let qp_max = qp_max_iterations(n);
+    let measured_qp = input.measured_qp_iterations;
+    let tracking = float("tracking_time_s", config.scanner.tracking_time_s)?;
+    let delay = float("extra_delay_s", config.scanner.extra_delay_s)?;
+    let noise = float("position_noise_m", config.measurement.position_noise_m)?;
+    let sigma = float("switching_sigma", c.switching_sigma)?;
+    let hash = hex(&input.config_hash);
+    let drag_arms = model
+        .capsules
+        .iter()
+        .enumerate()
+        .map(|(i, cap)| drag_arm(i, &cap.drag))
+        .collect::<Result<Vec<_>, _>>()?;
+    let switching = crate::tables::switching_constants(config, &model);
+    let l_f = float("l_f", switching.l_f)?;
+    let l_l = float("l_l", switching.l_l)?;
+    let l_v = float("l_v", switching.l_v)?;
+    let x_diam = float("x_diameter", switching.x_diameter)?;
+    let use_tables = input.tables.is_some();
+
+    let spec = quote! {
+        /// Dimensions, model constants and weights (SI) of this controller.
+        pub mod spec {
+            /// Number of capsules.
+            pub const M: usize = #m;
+            /// Number of states [x1, v1, x2, v2, ...].
+            pub const NX: usize = #nx;
+            /// Online window (inputs re-optimized per step).
+            pub const N: usize = #n;
+            /// Plan length (samples).
+            pub const K: usize = #k;
+            /// Controller sample time, s.
+            pub const DT_S: f64 = #dt;
+            /// RK4 sub-steps per sample.
+            pub const RK4_SUBSTEPS: usize = #substeps;
+            /// Gradient bound, T/m.
+            pub const U_MAX_T_PER_M: f64 = #u_max;
+            /// Magnetic acceleration per gradient, m/s^2 per T/m.
+            pub const G: [f64; M] = [#(#g),*];
+            /// Stage weights on the relative state (SI).
+            pub const Q: [f64; NX] = [#(#q),*];
+            /// Input weight per (T/m)^2.
+            pub const R: f64 = #r;
+            /// Terminal weights (SI).
+            pub const P: [f64; NX] = [#(#p),*];
+            /// State bound on each relative position, m.
+            pub const POSITION_BOUND_M: f64 = #pos_bound;
+            /// State bound on each speed, m/s.
+            pub const SPEED_BOUND_M_PER_S: f64 = #speed_bound;
+            /// SQP iterations per control step.
+            pub const SQP_ITERATIONS: usize = #sqp;
+            /// Active-set iterations allowed per QP.
+            pub const QP_MAX_ITERATIONS: usize = #qp_max;
+            /// Largest QP iteration count measured offline over the grid.
+            pub const QP_ITERATIONS_MEASURED_OFFLINE: usize = #measured_qp;
+            /// Halvings tried in the line search.
+            pub const LINE_SEARCH_TRIES: usize = 4;
+            /// Multipliers below this count as zero in the active-set QP.
+            pub const QP_MULTIPLIER_TOLERANCE: f64 = 1.0e-12;
+            /// Whether plans come from offline tables (false: the paper's NMPC).
+            pub const USE_TABLES: bool = #use_tables;
+            /// Tracking phase duration, s.
+            pub const TRACKING_TIME_S: f64 = #tracking;
+            /// Extra compute/transfer delay after tracking, s.
+            pub const EXTRA_DELAY_S: f64 = #delay;
+            /// Position measurement noise (standard deviation), m.
+            pub const POSITION_NOISE_M: f64 = #noise;
+            /// sigma of the switching rule (17).
+            pub const SWITCHING_SIGMA: f64 = #sigma;
+            /// Lipschitz constants of section III: dynamics, stage cost, terminal cost.
+            pub const L_F: f64 = #l_f;
+            pub const L_L: f64 = #l_l;
+            pub const L_V: f64 = #l_v;
+            /// ||2 alpha||, the diameter of the state set X.
+            pub const X_DIAMETER: f64 = #x_diam;
+            /// SHA-256 of the config this module was generated from.
+            pub const CONFIG_SHA256: &str = #hash;
+
+            /// Drag acceleration of capsule `i` at speed `v` (m/s^2) and its slope d a / d v.
+            #[inline]
+            pub fn drag(i: usize, v: f64) -> (f64, f64) {
+                match i {
+                    #(#drag_arms)*
+                    _ => (0.0, 0.0),
+                }
+            }
+        }
+    };
+
+    let tables = emit_tables(input.tables, k, m)?;
+    let solver_file = syn::parse_file(SOLVER_TEMPLATE)
+        .map_err(|e| EmitError::Parse(format!("solver template: {e}")))?;
+    let solver_attrs = &solver_file.attrs;
+    let solver_items = &solver_file.items;
+    let module = quote! {
+        #spec
+        #tables
+        pub mod solver {
+            #(#solver_attrs)*
+            #(#solver_items)*
+        }
+    };
+    let file: syn::File =
+        syn::parse2(module).map_err(|e| EmitError::Parse(format!("generated module: {e}")))?;
+    let preset = match c.preset {
+        Preset::Default => "default",
+        Preset::Paper => "paper",
+    };
+    Ok(format!(
+        "// @generated by capsule-mpc-generator {} from a config with sha256 {hash} (preset `{preset}`).\n\
+         // Do not edit: run `capsule-mpc generate` (see README).\n\n{}",
+        env!("CARGO_PKG_VERSION"),
+        prettyplease::unparse(&file)
+    ))
+}
+
+fn emit_tables(tables: Option<&Tables>, k: usize, m: usize) -> Result<TokenStream, EmitError> {
+    let empty_axis = Axis {
+        start: 0.0,
+        step: 1.0,
+        count: 1,
+    };
+    let (plan_axis, pos_axis, spd_axis) = match tables {
+        Some(t) => (
+            t.plan_axis.clone(),
+            t.index_position_axis.clone(),
+            t.index_speed_axis.clone(),
+        ),
+        None => (empty_axis.clone(), empty_axis.clone(), empty_axis),
+    };
+    let plan_axis_t = axis_tokens("plan_axis", &plan_axis)?;
+    let pos_axis_t = axis_tokens("index_position_axis", &pos_axis)?;
+    let spd_axis_t = axis_tokens("index_speed_axis", &spd_axis)?;
+    let (plan_rows, reached, index): (Vec<TokenStream>, Vec<bool>, Vec<u32>) = match tables {
+        Some(t) => {
+            let rows = t
+                .plans
+                .iter()
+                .map(|p| {
+                    let us = floats("plan u", &p.plan.u)?;
+                    Ok(quote! { [#(#us),*] })
+                })
+                .collect::<Result<Vec<_>, EmitError>>()?;
+            let reached = t.plans.iter().map(|p| p.reached).collect();
+            let index = t
+                .index
+                .iter()
+                .map(|&(plan, offset)| ((plan as u32) << 16) | offset as u32)
+                .collect();
+            (rows, reached, index)
+        }
+        // One dummy cell pointing at no plan (plan index past PLAN_COUNT).
+        None => (Vec::new(), Vec::new(), vec![u32::MAX]),
+    };
+    let plan_count = plan_rows.len();
+    let cells = index.len();
+    let expected_cells = pos_axis.count.pow(m as u32) * spd_axis.count.pow(m as u32);
+    debug_assert_eq!(cells, expected_cells.max(1));
+    let table_bytes = plan_count * k * 8 + plan_count + cells * 4;
+    let plan_count_ident = format_ident!("PLAN_COUNT");
+    Ok(quote! {
+        /// Offline tables: plans from rest over the relative-position grid and
+        /// the warm-start index over relative positions and speeds.
+        pub mod tables {
+            use super::spec::K;
+            /// A uniform grid axis.
+            #[derive(Debug, Clone, Copy)]
+            pub struct Axis { pub start: f64, pub step: f64, pub count: usize }
+            /// Grid of each capsule's relative start position (plans start at rest).
+            pub const PLAN_AXIS: Axis = #plan_axis_t;
+            /// Number of stored plans.
+            pub const #plan_count_ident: usize = #plan_count;
+            /// Index axes: relative positions (m) and speeds (m/s).
+            pub const INDEX_POSITION_AXIS: Axis = #pos_axis_t;
+            pub const INDEX_SPEED_AXIS: Axis = #spd_axis_t;
+            /// Bytes of table data in this module.
+            pub const TABLE_BYTES: usize = #table_bytes;
+            /// Gradient plans, T/m.
+            pub static PLAN_U: [[f64; K]; PLAN_COUNT] = [#(#plan_rows),*];
+            /// Whether each plan reaches its target.
+            pub static PLAN_REACHED: [bool; PLAN_COUNT] = [#(#reached),*];
+            /// Per index cell: plan << 16 | step offset.
+            pub static INDEX: [u32; #cells] = [#(#index),*];
+        }
+    })
+}
+
+/// The generated crate's `lib.rs`: the static part of the crate.
+pub fn emit_lib() -> String {
+    LIB_TEMPLATE.to_string()
+}

@@ -1,0 +1,128 @@
+//! `capsule-mpc generate`: tables + emitted crate, written atomically, and the
+//! `--check` comparison against what is committed.
+
+use crate::config::{Config, CostUnits, Preset};
+use crate::emit::{emit_lib, emit_module, EmitError, EmitInput};
+use crate::tables::{build_tables, config_hash, Progress, Tables};
+use std::path::{Path, PathBuf};
+
+/// The generated crate's manifest (static).
+const GENERATED_MANIFEST: &str = include_str!("../templates/Cargo.toml.in");
+
+/// Table I weights of the paper (states in cm, cm/s; u in T/m).
+pub const PAPER_Q_PER_CAPSULE: [f64; 2] = [0.02, 0.001];
+pub const PAPER_R: f64 = 1.0e-5;
+/// P = 1e-3 Q in the paper.
+pub const PAPER_P_OVER_Q: f64 = 1.0e-3;
+/// The paper's horizon, samples.
+pub const PAPER_HORIZON: usize = 10;
+/// SQP iterations per step for the paper preset (it solves its NLP to
+/// convergence each step; 10 Gauss-Newton steps get there on N = 10).
+pub const PAPER_SQP_ITERATIONS: usize = 10;
+
+/// The paper's NMPC taken literally, on the same capsules and scanner.
+pub fn paper_preset(config: &Config) -> Config {
+    let mut c = config.clone();
+    let m = c.capsule_count();
+    let ctl = &mut c.controller;
+    ctl.preset = Preset::Paper;
+    ctl.horizon_steps = PAPER_HORIZON;
+    ctl.plan_steps = PAPER_HORIZON;
+    ctl.cost_units = CostUnits::Cm;
+    ctl.q = PAPER_Q_PER_CAPSULE.repeat(m);
+    ctl.r = PAPER_R;
+    ctl.p = ctl.q.iter().map(|q| q * PAPER_P_OVER_Q).collect();
+    ctl.sqp_iterations = PAPER_SQP_ITERATIONS;
+    c
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum GenerateError {
+    #[error(transparent)]
+    Emit(#[from] EmitError),
+    #[error("{path}: {reason}")]
+    Io { path: String, reason: String },
+}
+
+fn io_err(path: &Path, e: std::io::Error) -> GenerateError {
+    GenerateError::Io {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    }
+}
+
+/// Files of the generated crate, relative paths and contents.
+pub struct GeneratedFiles {
+    pub files: Vec<(PathBuf, Vec<u8>)>,
+    pub tables: Tables,
+}
+
+/// Builds the tables and emits every file of the generated crate.
+pub fn generate(config: &Config, progress: &dyn Progress) -> Result<GeneratedFiles, GenerateError> {
+    let tables = build_tables(config, progress);
+    emit_all(config, tables)
+}
+
+/// Emits every file from already-built tables.
+pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, GenerateError> {
+    let controller = emit_module(&EmitInput {
+        config,
+        tables: Some(&tables),
+        config_hash: config_hash(config),
+        measured_qp_iterations: 0,
+    })?;
+    let paper = paper_preset(config);
+    let paper_module = emit_module(&EmitInput {
+        config: &paper,
+        tables: None,
+        config_hash: config_hash(&paper),
+        measured_qp_iterations: 0,
+    })?;
+    let files = vec![
+        (
+            PathBuf::from("Cargo.toml"),
+            GENERATED_MANIFEST.as_bytes().to_vec(),
+        ),
+        (PathBuf::from("src/lib.rs"), emit_lib().into_bytes()),
+        (PathBuf::from("src/controller.rs"), controller.into_bytes()),
+        (
+            PathBuf::from("src/paper_preset.rs"),
+            paper_module.into_bytes(),
+        ),
+        (PathBuf::from("tables.bin"), tables.to_bytes()),
+    ];
+    Ok(GeneratedFiles { files, tables })
+}
+
+/// Writes each file via a temporary file in the same directory and a rename,
+/// so an interrupted run never leaves a half-written file.
+pub fn write_atomically(dir: &Path, files: &GeneratedFiles) -> Result<(), GenerateError> {
+    for (rel, bytes) in &files.files {
+        let path = dir.join(rel);
+        let parent = path.parent().unwrap_or(dir);
+        std::fs::create_dir_all(parent).map_err(|e| io_err(parent, e))?;
+        let tmp = parent.join(format!(
+            ".{}.tmp-{}",
+            rel.file_name().and_then(|n| n.to_str()).unwrap_or("file"),
+            std::process::id()
+        ));
+        std::fs::write(&tmp, bytes).map_err(|e| io_err(&tmp, e))?;
+        std::fs::rename(&tmp, &path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            io_err(&path, e)
+        })?;
+    }
+    Ok(())
+}
+
+/// Relative paths whose committed content differs from `files` (or is missing).
+pub fn differences(dir: &Path, files: &GeneratedFiles) -> Vec<PathBuf> {
+    files
+        .files
+        .iter()
+        .filter(|(rel, bytes)| {
+            std::fs::read(dir.join(rel)).ok().as_deref() != Some(bytes.as_slice())
+        })
+        .map(|(rel, _)| rel.clone())
+        .collect()
+}

@@ -1,0 +1,492 @@
+//! Offline tables: long-horizon plans from rest over a grid of target-relative
+//! positions, and an index over the full relative state (positions and
+//! speeds) that names the best stored plan sample to warm-start from.
+//!
+//! Why plans from rest: at rest the model linearizes to identical double
+//! integrators, so a local solver online can never discover a separating
+//! manoeuvre; it must be handed one. Every state visited along a stored plan
+//! is itself covered by that plan's tail (principle of optimality), so the
+//! index over moving states points into the tails.
+
+use crate::config::Config;
+use crate::model::Model;
+use crate::ocp::{Ocp, Plan};
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+/// Bumped whenever the table layout or its meaning changes.
+pub const TABLE_FORMAT_VERSION: u32 = 1;
+/// First bytes of every table file.
+pub const TABLE_MAGIC: [u8; 8] = *b"CAPSMPC\0";
+/// A plan "reaches" its target when its final position error is below this, m.
+pub const REACH_TOLERANCE_M: f64 = 5.0e-4;
+/// Speed half-range of the warm-start index, m/s (plans peak near 0.35 m/s).
+pub const INDEX_SPEED_RANGE_M_PER_S: f64 = 0.4;
+/// Speed step of the warm-start index, m/s.
+pub const INDEX_SPEED_STEP_M_PER_S: f64 = 0.1;
+/// The index covers positions to this multiple of the plan grid's range
+/// (plans overshoot their start box on the way).
+pub const INDEX_POSITION_MARGIN: f64 = 1.25;
+/// Candidates (nearest by scaled distance) whose tails are rolled out when
+/// choosing a cell's warm start.
+const INDEX_CANDIDATES: usize = 8;
+
+/// Grid geometry shared by the plan grid and the index.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Axis {
+    /// Value of the first point.
+    pub start: f64,
+    pub step: f64,
+    pub count: usize,
+}
+
+impl Axis {
+    pub fn symmetric(half_range: f64, step: f64) -> Axis {
+        let half = (half_range / step).round() as usize;
+        Axis {
+            start: -(half as f64) * step,
+            step,
+            count: 2 * half + 1,
+        }
+    }
+
+    pub fn value(&self, i: usize) -> f64 {
+        self.start + i as f64 * self.step
+    }
+
+    /// Nearest point, or None outside the axis (half a step of margin).
+    pub fn nearest(&self, v: f64) -> Option<usize> {
+        let f = ((v - self.start) / self.step).round();
+        (f >= 0.0 && f < self.count as f64).then_some(f as usize)
+    }
+}
+
+/// One stored plan, from rest at `e0`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlanEntry {
+    pub e0: Vec<f64>,
+    pub plan: Plan,
+    pub reached: bool,
+}
+
+/// Constants of the paper's switching rule (17), computed on X x U.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SwitchingConstants {
+    /// Lipschitz constant of the dynamics, max(1, 2 b_i alpha_v).
+    pub l_f: f64,
+    /// Lipschitz constant of the stage cost on X x U.
+    pub l_l: f64,
+    /// Lipschitz constant of the terminal cost on X.
+    pub l_v: f64,
+    /// ||2 alpha||: diameter of X.
+    pub x_diameter: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TableHeader {
+    pub magic: [u8; 8],
+    pub format_version: u32,
+    /// SHA-256 of the canonical JSON of the config the tables were made from.
+    pub config_hash: [u8; 32],
+    pub generator_version: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Tables {
+    pub header: TableHeader,
+    pub plan_steps: usize,
+    /// Axis of each relative position in the plan grid.
+    pub plan_axis: Axis,
+    /// Plans in row-major order over the M position axes.
+    pub plans: Vec<PlanEntry>,
+    pub index_position_axis: Axis,
+    pub index_speed_axis: Axis,
+    /// Per cell (row-major over [e1, v1, e2, v2, ...]): (plan, step offset).
+    pub index: Vec<(u16, u16)>,
+    pub switching: SwitchingConstants,
+}
+
+/// Errors reading a table file.
+#[derive(Debug, thiserror::Error)]
+pub enum TableError {
+    #[error("table file {path}: {reason}")]
+    Io { path: String, reason: String },
+    #[error("table file is truncated or corrupted: {0}")]
+    Corrupt(String),
+    #[error("table file has magic {found:?}, not a capsule-mpc table")]
+    Magic { found: [u8; 8] },
+    #[error("table file format version {found}, this build reads version {expected}; regenerate")]
+    Version { found: u32, expected: u32 },
+    #[error("table file was made from a different config (hash {found}, config hash {expected}); regenerate")]
+    ConfigMismatch { found: String, expected: String },
+}
+
+/// SHA-256 of the config's canonical JSON.
+pub fn config_hash(config: &Config) -> [u8; 32] {
+    let json = serde_json::to_vec(config).expect("config serializes");
+    Sha256::digest(&json).into()
+}
+
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+impl Tables {
+    /// Serializes with bincode (standard config).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        bincode::serde::encode_to_vec(self, bincode::config::standard()).expect("tables encode")
+    }
+
+    /// Decodes and checks magic, version and the config hash.
+    pub fn from_bytes(bytes: &[u8], config: &Config) -> Result<Tables, TableError> {
+        let (tables, used): (Tables, usize) =
+            bincode::serde::decode_from_slice(bytes, bincode::config::standard())
+                .map_err(|e| TableError::Corrupt(e.to_string()))?;
+        if used != bytes.len() {
+            return Err(TableError::Corrupt(format!(
+                "{} trailing bytes after the tables",
+                bytes.len() - used
+            )));
+        }
+        let h = &tables.header;
+        if h.magic != TABLE_MAGIC {
+            return Err(TableError::Magic { found: h.magic });
+        }
+        if h.format_version != TABLE_FORMAT_VERSION {
+            return Err(TableError::Version {
+                found: h.format_version,
+                expected: TABLE_FORMAT_VERSION,
+            });
+        }
+        let expected = config_hash(config);
+        if h.config_hash != expected {
+            return Err(TableError::ConfigMismatch {
+                found: hex(&h.config_hash),
+                expected: hex(&expected),
+            });
+        }
+        Ok(tables)
+    }
+
+    pub fn read(path: &std::path::Path, config: &Config) -> Result<Tables, TableError> {
+        let bytes = std::fs::read(path).map_err(|e| TableError::Io {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        Tables::from_bytes(&bytes, config)
+    }
+
+    /// Number of plans that reach their target within [`REACH_TOLERANCE_M`].
+    pub fn reached_count(&self) -> usize {
+        self.plans.iter().filter(|p| p.reached).count()
+    }
+}
+
+/// Row-major multi-index of flat index `flat` over `dims`.
+fn unflatten(mut flat: usize, dims: &[usize]) -> Vec<usize> {
+    let mut out = vec![0; dims.len()];
+    for (d, &n) in dims.iter().enumerate().rev() {
+        out[d] = flat % n;
+        flat /= n;
+    }
+    out
+}
+
+fn flatten(idx: &[usize], dims: &[usize]) -> usize {
+    idx.iter().zip(dims).fold(0, |acc, (&i, &n)| acc * n + i)
+}
+
+/// Deterministic starting guesses: zero input plus random piecewise-constant
+/// sequences (segments of 2-11 samples, levels in [-u_max, u_max]).
+fn starting_guesses(seed: u64, starts: usize, steps: usize, u_max: f64) -> Vec<Vec<f64>> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut guesses = vec![vec![0.0; steps]];
+    while guesses.len() < starts {
+        let mut u = vec![0.0; steps];
+        let mut i = 0;
+        while i < steps {
+            let len = rng.gen_range(2..12);
+            let level = rng.gen_range(-1.0..1.0) * u_max;
+            for v in u.iter_mut().skip(i).take(len) {
+                *v = level;
+            }
+            i += len;
+        }
+        guesses.push(u);
+    }
+    guesses
+}
+
+fn best_of(ocp: &Ocp, e0: &[f64], guesses: &[Vec<f64>], iterations: usize) -> Plan {
+    guesses
+        .iter()
+        .map(|g| ocp.solve(e0, g, iterations))
+        .min_by(|a, b| a.cost.total_cmp(&b.cost))
+        .expect("at least one guess")
+}
+
+/// Progress reporting hook (the CLI shows a progress bar).
+pub trait Progress: Sync {
+    fn start(&self, phase: &str, total: usize);
+    fn tick(&self);
+}
+
+/// No progress output.
+pub struct Silent;
+impl Progress for Silent {
+    fn start(&self, _: &str, _: usize) {}
+    fn tick(&self) {}
+}
+
+/// Solves every grid plan (multi-start, then continuation from neighbours)
+/// and builds the warm-start index. Deterministic: same config, same bytes.
+pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
+    let model = Model::from_config(config);
+    let m = model.capsule_count();
+    let steps = config.controller.plan_steps;
+    let ocp = Ocp::from_config(&model, config, steps);
+    let grid = &config.grid;
+    let axis = Axis::symmetric(grid.position_range_m, grid.position_step_m);
+    let dims = vec![axis.count; m];
+    let total: usize = dims.iter().product();
+    let e0_of = |flat: usize| -> Vec<f64> {
+        let idx = unflatten(flat, &dims);
+        idx.iter().flat_map(|&i| [axis.value(i), 0.0]).collect()
+    };
+    // Odd symmetry f(-x, -u) = -f(x, u): the plan for -e0 is minus the plan
+    // for e0, and the grid is symmetric, so flat index i mirrors to total-1-i.
+    let half = total.div_ceil(2);
+    progress.start("multi-start solves", half);
+    let first: Vec<Plan> = (0..half)
+        .into_par_iter()
+        .map(|flat| {
+            let guesses = starting_guesses(flat as u64, grid.starts, steps, model.u_max_t_per_m);
+            let plan = best_of(&ocp, &e0_of(flat), &guesses, grid.sqp_iterations);
+            progress.tick();
+            plan
+        })
+        .collect();
+    let mirror = |p: &Plan| Plan {
+        u: p.u.iter().map(|v| -v).collect(),
+        states: p
+            .states
+            .iter()
+            .map(|s| s.iter().map(|v| -v).collect())
+            .collect(),
+        cost: p.cost,
+        iterations: p.iterations,
+    };
+    let plan_at = |plans: &[Plan], flat: usize| -> Plan {
+        if flat < half {
+            plans[flat].clone()
+        } else {
+            mirror(&plans[total - 1 - flat])
+        }
+    };
+    // Continuation: re-solve from each neighbour's plan; keep the best.
+    progress.start("continuation from neighbours", half);
+    let second: Vec<Plan> = (0..half)
+        .into_par_iter()
+        .map(|flat| {
+            let idx = unflatten(flat, &dims);
+            let mut guesses = Vec::new();
+            for d in 0..m {
+                for delta in [-1i64, 1] {
+                    let j = idx[d] as i64 + delta;
+                    if j >= 0 && (j as usize) < axis.count {
+                        let mut n = idx.clone();
+                        n[d] = j as usize;
+                        guesses.push(plan_at(&first, flatten(&n, &dims)).u);
+                    }
+                }
+            }
+            let mut best = first[flat].clone();
+            let candidate = best_of(&ocp, &e0_of(flat), &guesses, grid.sqp_iterations);
+            if candidate.cost < best.cost {
+                best = candidate;
+            }
+            progress.tick();
+            best
+        })
+        .collect();
+    let plans: Vec<PlanEntry> = (0..total)
+        .map(|flat| {
+            let plan = plan_at(&second, flat);
+            let reached = plan.final_position_error_m() <= REACH_TOLERANCE_M;
+            PlanEntry {
+                e0: e0_of(flat),
+                plan,
+                reached,
+            }
+        })
+        .collect();
+
+    let index_position_axis = Axis::symmetric(
+        INDEX_POSITION_MARGIN * grid.position_range_m,
+        grid.position_step_m,
+    );
+    let index_speed_axis = Axis::symmetric(INDEX_SPEED_RANGE_M_PER_S, INDEX_SPEED_STEP_M_PER_S);
+    let index = build_index(
+        &ocp,
+        &plans,
+        &index_position_axis,
+        &index_speed_axis,
+        progress,
+    );
+    Tables {
+        header: TableHeader {
+            magic: TABLE_MAGIC,
+            format_version: TABLE_FORMAT_VERSION,
+            config_hash: config_hash(config),
+            generator_version: env!("CARGO_PKG_VERSION").to_string(),
+        },
+        plan_steps: steps,
+        plan_axis: axis,
+        plans,
+        index_position_axis,
+        index_speed_axis,
+        index,
+        switching: switching_constants(config, &model),
+    }
+}
+
+/// For every index cell, the stored plan sample whose tail, rolled out from
+/// the cell centre, has the lowest cost among the nearest candidates.
+fn build_index(
+    ocp: &Ocp,
+    plans: &[PlanEntry],
+    pos: &Axis,
+    spd: &Axis,
+    progress: &dyn Progress,
+) -> Vec<(u16, u16)> {
+    let m = ocp.model.capsule_count();
+    let steps = ocp.steps;
+    let dims: Vec<usize> = (0..2 * m)
+        .map(|j| if j % 2 == 0 { pos.count } else { spd.count })
+        .collect();
+    let cells: usize = dims.iter().product();
+    // Only reached plans are warm-start material.
+    let samples: Vec<(u16, u16, &[f64])> = plans
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.reached)
+        .flat_map(|(pi, p)| {
+            p.plan.states[..steps]
+                .iter()
+                .enumerate()
+                .map(move |(k, s)| (pi as u16, k as u16, s.as_slice()))
+        })
+        .collect();
+    let scale: Vec<f64> = (0..2 * m)
+        .map(|j| if j % 2 == 0 { pos.step } else { spd.step })
+        .collect();
+    progress.start("warm-start index", cells);
+    (0..cells)
+        .into_par_iter()
+        .map(|flat| {
+            let idx = unflatten(flat, &dims);
+            let centre: Vec<f64> = idx
+                .iter()
+                .enumerate()
+                .map(|(j, &i)| {
+                    if j % 2 == 0 {
+                        pos.value(i)
+                    } else {
+                        spd.value(i)
+                    }
+                })
+                .collect();
+            let mut near: Vec<(f64, usize)> = samples
+                .iter()
+                .enumerate()
+                .map(|(si, (_, _, s))| {
+                    let d: f64 = (0..2 * m)
+                        .map(|j| ((s[j] - centre[j]) / scale[j]).powi(2))
+                        .sum();
+                    (d, si)
+                })
+                .collect();
+            let keep = INDEX_CANDIDATES.min(near.len());
+            if keep == 0 {
+                progress.tick();
+                return (u16::MAX, 0);
+            }
+            near.select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            near.truncate(keep);
+            near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let best = near
+                .iter()
+                .map(|&(_, si)| {
+                    let (pi, k, _) = samples[si];
+                    let plan = &plans[pi as usize].plan;
+                    let mut tail = vec![0.0; steps];
+                    tail[..steps - k as usize].copy_from_slice(&plan.u[k as usize..]);
+                    (ocp.rollout(&centre, &tail).1, pi, k)
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .expect("non-empty");
+            progress.tick();
+            (best.1, best.2)
+        })
+        .collect()
+}
+
+/// L_f, L_l, L_v of section III on X x U (in the cost's units, SI here).
+pub fn switching_constants(config: &Config, model: &Model) -> SwitchingConstants {
+    let c = &config.controller;
+    let w = crate::ocp::OcpWeights::from_config(config);
+    let alpha: Vec<f64> = (0..model.state_count())
+        .map(|j| {
+            if j % 2 == 0 {
+                c.position_bound_m
+            } else {
+                c.speed_bound_m_per_s
+            }
+        })
+        .collect();
+    // |grad L| = ||(2 Q alpha, 2 R u_max)||, |grad V| = ||2 P alpha||.
+    let l_l = (alpha
+        .iter()
+        .zip(&w.q)
+        .map(|(a, q)| (2.0 * q * a).powi(2))
+        .sum::<f64>()
+        + (2.0 * w.r * model.u_max_t_per_m).powi(2))
+    .sqrt();
+    let l_v = alpha
+        .iter()
+        .zip(&w.p)
+        .map(|(a, p)| (2.0 * p * a).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    SwitchingConstants {
+        l_f: model.lipschitz_f(c.speed_bound_m_per_s),
+        l_l,
+        l_v,
+        x_diameter: alpha.iter().map(|a| (2.0 * a).powi(2)).sum::<f64>().sqrt(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_nearest_and_bounds() {
+        let a = Axis::symmetric(0.04, 0.005);
+        assert_eq!(a.count, 17);
+        assert_eq!(a.nearest(0.0), Some(8));
+        assert_eq!(a.nearest(0.0399), Some(16));
+        assert_eq!(a.nearest(0.05), None);
+        assert!((a.value(0) + 0.04).abs() < 1e-15);
+    }
+
+    #[test]
+    fn flatten_roundtrip() {
+        let dims = [3, 5, 7];
+        for f in 0..105 {
+            assert_eq!(flatten(&unflatten(f, &dims), &dims), f);
+        }
+    }
+}

@@ -1,0 +1,807 @@
+//! Fixed-size online solver: refines a long plan with Gauss-Newton SQP steps
+//! on a window of N inputs, the tail's cost-to-go as terminal cost.
+//!
+//! Every step: (1) shift the plan by the samples already applied; (2) if a
+//! stored plan tail (from the warm-start index) is cheaper from the current
+//! state, take it; (3) for a fixed number of SQP iterations: roll the plan out
+//! over K samples with exact RK4 Jacobians, run the tail's cost-to-go
+//! backwards to step N, condense the window into an N x N box-constrained QP,
+//! solve it with a primal active-set method, and accept the step only if the
+//! true nonlinear cost decreases. No heap, no recursion, fixed loop bounds.
+
+use super::spec::*;
+use super::tables::*;
+use crate::{PlanSolver, SolveReport, SolveStatus};
+
+/// Per-capsule 2x2 Jacobian (row major) and input column of one sample.
+#[derive(Debug, Clone, Copy)]
+struct StepJacobian {
+    a: [[f64; 4]; M],
+    b: [[f64; 2]; M],
+}
+
+const ZERO_JACOBIAN: StepJacobian = StepJacobian {
+    a: [[0.0; 4]; M],
+    b: [[0.0; 2]; M],
+};
+
+/// All memory the solver uses: created once, reused every step.
+#[derive(Debug, Clone)]
+pub struct Solver {
+    /// Current plan: `plan[0]` is the gradient for the coming sample, T/m.
+    plan: [f64; K],
+    /// Whether `plan` holds anything (false after reset).
+    has_plan: bool,
+    /// Trajectory of the plan, relative to the target.
+    states: [[f64; NX]; K + 1],
+    jac: [StepJacobian; K],
+    candidate: [f64; K],
+    /// Window sensitivities: sens[k][j] = d e_k / d u_j (k = 0..N).
+    sens: [[[f64; NX]; N]; N + 1],
+    /// Tail cost-to-go at step N: per-capsule 2x2 Hessian and gradient.
+    tail_hess: [[f64; 4]; M],
+    tail_grad: [f64; NX],
+    qp: BoxQp,
+}
+
+impl Default for Solver {
+    fn default() -> Self {
+        Solver::new()
+    }
+}
+
+impl Solver {
+    pub const fn new() -> Solver {
+        Solver {
+            plan: [0.0; K],
+            has_plan: false,
+            states: [[0.0; NX]; K + 1],
+            jac: [ZERO_JACOBIAN; K],
+            candidate: [0.0; K],
+            sens: [[[0.0; NX]; N]; N + 1],
+            tail_hess: [[0.0; 4]; M],
+            tail_grad: [0.0; NX],
+            qp: BoxQp::new(),
+        }
+    }
+
+    /// Forgets the plan (new target, or after a fault).
+    pub fn reset(&mut self) {
+        self.plan = [0.0; K];
+        self.has_plan = false;
+    }
+
+    /// The current plan (gradient per sample, T/m), `plan()[0]` first.
+    pub fn plan(&self) -> &[f64; K] {
+        &self.plan
+    }
+
+    /// Predicted relative states along the plan (valid after `solve`).
+    pub fn predicted_states(&self) -> &[[f64; NX]; K + 1] {
+        &self.states
+    }
+
+    /// Drops the first `samples` inputs (they have been applied) and pads
+    /// with zero gradient.
+    pub fn shift(&mut self, samples: usize) {
+        let s = if samples > K { K } else { samples };
+        let mut i = 0;
+        while i < K {
+            self.plan[i] = if i + s < K { self.plan[i + s] } else { 0.0 };
+            i += 1;
+        }
+    }
+
+    /// Whether a start at rest at relative position `e` (speeds ignored) is
+    /// covered by a stored plan that reaches its target.
+    pub fn covers_from_rest(e: &[f64; NX]) -> bool {
+        if !USE_TABLES {
+            return true;
+        }
+        let mut flat = 0usize;
+        let mut i = 0;
+        while i < M {
+            match axis_nearest(&PLAN_AXIS, e[2 * i]) {
+                Some(j) => flat = flat * PLAN_AXIS.count + j,
+                None => return false,
+            }
+            i += 1;
+        }
+        PLAN_REACHED[flat]
+    }
+
+    /// Refines the plan from relative state `e = x - x_target`.
+    pub fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
+        let mut report = SolveReport {
+            status: SolveStatus::Refined,
+            cost: 0.0,
+            took_table_plan: false,
+            qp_iterations: 0,
+            max_qp_iterations: 0,
+        };
+        let mut cost = if self.has_plan {
+            rollout_cost(e, &self.plan)
+        } else {
+            f64::INFINITY
+        };
+        if USE_TABLES {
+            match lookup_tail(e, &mut self.candidate) {
+                Some(()) => {
+                    let c = rollout_cost(e, &self.candidate);
+                    if c < cost {
+                        self.plan = self.candidate;
+                        cost = c;
+                        report.took_table_plan = true;
+                    }
+                }
+                None if !self.has_plan => {
+                    report.status = SolveStatus::OutOfRange;
+                    report.cost = f64::INFINITY;
+                    return report;
+                }
+                None => {}
+            }
+        }
+        self.has_plan = true;
+        let mut it = 0;
+        while it < SQP_ITERATIONS {
+            let (new_cost, qp_iters, converged) = self.sqp_iteration(e, cost);
+            cost = new_cost;
+            report.qp_iterations += qp_iters;
+            if qp_iters > report.max_qp_iterations {
+                report.max_qp_iterations = qp_iters;
+            }
+            if !converged {
+                report.status = SolveStatus::IterationLimit;
+            }
+            it += 1;
+        }
+        report.cost = cost;
+        report
+    }
+
+    /// One SQP iteration; returns (cost after, QP iterations, QP converged).
+    fn sqp_iteration(&mut self, e: &[f64; NX], cost: f64) -> (f64, u32, bool) {
+        rollout_with_jacobians(e, &self.plan, &mut self.states, &mut self.jac);
+        self.tail_cost_to_go();
+        self.window_sensitivities();
+        self.condense();
+        let (iters, converged) = self.qp.solve();
+        // Backtracking on the true cost; the plan stays feasible (|u| <= u_max).
+        let mut step = 1.0;
+        let mut tries = 0;
+        while tries < LINE_SEARCH_TRIES {
+            self.candidate = self.plan;
+            let mut j = 0;
+            while j < N {
+                self.candidate[j] = clamp_u(self.plan[j] + step * self.qp.x[j]);
+                j += 1;
+            }
+            let c = rollout_cost(e, &self.candidate);
+            if c < cost {
+                self.plan = self.candidate;
+                return (c, iters, converged);
+            }
+            step *= 0.5;
+            tries += 1;
+        }
+        (cost, iters, converged)
+    }
+
+    /// Gauss-Newton cost-to-go of the fixed tail, from K back to N:
+    /// H_k = W_k + A_k' H_{k+1} A_k, g_k = W_k e_k + A_k' g_{k+1}.
+    fn tail_cost_to_go(&mut self) {
+        let mut i = 0;
+        while i < M {
+            let (xi, vi) = (2 * i, 2 * i + 1);
+            let mut h = [P[xi], 0.0, 0.0, P[vi]];
+            let mut g = [P[xi] * self.states[K][xi], P[vi] * self.states[K][vi]];
+            let mut k = K;
+            while k > N {
+                k -= 1;
+                let a = &self.jac[k].a[i];
+                // A' H A with A = [a0 a1; a2 a3], H symmetric [h0 h1; h1 h3].
+                let t0 = h[0] * a[0] + h[1] * a[2];
+                let t1 = h[0] * a[1] + h[1] * a[3];
+                let t2 = h[1] * a[0] + h[3] * a[2];
+                let t3 = h[1] * a[1] + h[3] * a[3];
+                let n0 = a[0] * t0 + a[2] * t2 + Q[xi];
+                let n1 = a[0] * t1 + a[2] * t3;
+                let n3 = a[1] * t1 + a[3] * t3 + Q[vi];
+                h = [n0, n1, n1, n3];
+                let g0 = a[0] * g[0] + a[2] * g[1] + Q[xi] * self.states[k][xi];
+                let g1 = a[1] * g[0] + a[3] * g[1] + Q[vi] * self.states[k][vi];
+                g = [g0, g1];
+            }
+            self.tail_hess[i] = h;
+            self.tail_grad[xi] = g[0];
+            self.tail_grad[vi] = g[1];
+            i += 1;
+        }
+    }
+
+    /// sens[k][j] = d e_k / d u_j for k <= N, j < k.
+    fn window_sensitivities(&mut self) {
+        let mut k = 0;
+        while k < N {
+            let mut i = 0;
+            while i < M {
+                let (xi, vi) = (2 * i, 2 * i + 1);
+                let a = &self.jac[k].a[i];
+                let mut j = 0;
+                while j < k {
+                    let (s0, s1) = (self.sens[k][j][xi], self.sens[k][j][vi]);
+                    self.sens[k + 1][j][xi] = a[0] * s0 + a[1] * s1;
+                    self.sens[k + 1][j][vi] = a[2] * s0 + a[3] * s1;
+                    j += 1;
+                }
+                self.sens[k + 1][k][xi] = self.jac[k].b[i][0];
+                self.sens[k + 1][k][vi] = self.jac[k].b[i][1];
+                i += 1;
+            }
+            k += 1;
+        }
+    }
+
+    /// Builds the window QP: H = sum S'QS + S_N' H_N S_N + R I, g likewise.
+    fn condense(&mut self) {
+        let qp = &mut self.qp;
+        let mut a = 0;
+        while a < N {
+            let mut g = R * self.plan[a];
+            let mut b = a;
+            while b < N {
+                qp.h[a][b] = if a == b { R } else { 0.0 };
+                b += 1;
+            }
+            // Stage terms k = a+1 .. N-1.
+            let mut k = a + 1;
+            while k < N {
+                let sa = &self.sens[k][a];
+                let mut r = 0;
+                while r < NX {
+                    g += sa[r] * Q[r] * self.states[k][r];
+                    r += 1;
+                }
+                let mut b = a;
+                while b < k {
+                    let sb = &self.sens[k][b];
+                    let mut acc = 0.0;
+                    let mut r = 0;
+                    while r < NX {
+                        acc += sa[r] * Q[r] * sb[r];
+                        r += 1;
+                    }
+                    qp.h[a][b] += acc;
+                    b += 1;
+                }
+                k += 1;
+            }
+            // Terminal (tail cost-to-go) at N.
+            let sa = &self.sens[N][a];
+            let mut i = 0;
+            while i < M {
+                let (xi, vi) = (2 * i, 2 * i + 1);
+                g += sa[xi] * self.tail_grad[xi] + sa[vi] * self.tail_grad[vi];
+                let hh = &self.tail_hess[i];
+                let mut b = a;
+                while b < N {
+                    let sb = &self.sens[N][b];
+                    qp.h[a][b] += sa[xi] * (hh[0] * sb[xi] + hh[1] * sb[vi])
+                        + sa[vi] * (hh[2] * sb[xi] + hh[3] * sb[vi]);
+                    b += 1;
+                }
+                i += 1;
+            }
+            qp.g[a] = g;
+            qp.lo[a] = -U_MAX_T_PER_M - self.plan[a];
+            qp.hi[a] = U_MAX_T_PER_M - self.plan[a];
+            a += 1;
+        }
+        // Mirror the upper triangle.
+        let mut a = 0;
+        while a < N {
+            let mut b = 0;
+            while b < a {
+                qp.h[a][b] = qp.h[b][a];
+                b += 1;
+            }
+            a += 1;
+        }
+    }
+}
+
+/// Dense box-constrained QP `min 1/2 x'Hx + g'x, lo <= x <= hi` (lo <= 0 <= hi),
+/// solved by a primal active-set method from x = 0.
+#[derive(Debug, Clone)]
+pub struct BoxQp {
+    pub h: [[f64; N]; N],
+    pub g: [f64; N],
+    pub lo: [f64; N],
+    pub hi: [f64; N],
+    pub x: [f64; N],
+    /// -1 at lower bound, +1 at upper bound, 0 free.
+    active: [i8; N],
+    chol: [[f64; N]; N],
+    rhs: [f64; N],
+    newton: [f64; N],
+    free: [usize; N],
+}
+
+impl Default for BoxQp {
+    fn default() -> Self {
+        BoxQp::new()
+    }
+}
+
+impl BoxQp {
+    pub const fn new() -> BoxQp {
+        BoxQp {
+            h: [[0.0; N]; N],
+            g: [0.0; N],
+            lo: [0.0; N],
+            hi: [0.0; N],
+            x: [0.0; N],
+            active: [0; N],
+            chol: [[0.0; N]; N],
+            rhs: [0.0; N],
+            newton: [0.0; N],
+            free: [0; N],
+        }
+    }
+
+    /// Returns (iterations, converged). On the iteration bound, `x` is the
+    /// last feasible iterate (always within the box).
+    pub fn solve(&mut self) -> (u32, bool) {
+        self.x = [0.0; N];
+        self.active = [0; N];
+        let mut iter = 0u32;
+        while (iter as usize) < QP_MAX_ITERATIONS {
+            iter += 1;
+            // Newton step on the free set with the active variables fixed.
+            let nf = self.collect_free();
+            if nf > 0 && !self.factor_free(nf) {
+                return (iter, false);
+            }
+            self.free_newton_point(nf);
+            // Ratio test from x towards the Newton point.
+            let mut t = 1.0;
+            let mut blocking = usize::MAX;
+            let mut f = 0;
+            while f < nf {
+                let j = self.free[f];
+                let d = self.newton[j] - self.x[j];
+                if d > 0.0 && self.x[j] + d > self.hi[j] {
+                    let tj = (self.hi[j] - self.x[j]) / d;
+                    if tj < t {
+                        t = tj;
+                        blocking = j;
+                    }
+                } else if d < 0.0 && self.x[j] + d < self.lo[j] {
+                    let tj = (self.lo[j] - self.x[j]) / d;
+                    if tj < t {
+                        t = tj;
+                        blocking = j;
+                    }
+                }
+                f += 1;
+            }
+            let mut f = 0;
+            while f < nf {
+                let j = self.free[f];
+                self.x[j] += t * (self.newton[j] - self.x[j]);
+                f += 1;
+            }
+            if blocking != usize::MAX {
+                let up = self.newton[blocking] > self.x[blocking];
+                self.x[blocking] = if up { self.hi[blocking] } else { self.lo[blocking] };
+                self.active[blocking] = if up { 1 } else { -1 };
+                continue;
+            }
+            // Optimal on this face: release the most wrong-signed multiplier.
+            let mut worst = 0.0;
+            let mut release = usize::MAX;
+            let mut j = 0;
+            while j < N {
+                if self.active[j] != 0 {
+                    let mut grad = self.g[j];
+                    let mut c = 0;
+                    while c < N {
+                        grad += self.h[j][c] * self.x[c];
+                        c += 1;
+                    }
+                    // At an upper bound the gradient must be <= 0, at a lower >= 0.
+                    let wrong = if self.active[j] > 0 { grad } else { -grad };
+                    if wrong > worst + QP_MULTIPLIER_TOLERANCE {
+                        worst = wrong;
+                        release = j;
+                    }
+                }
+                j += 1;
+            }
+            if release == usize::MAX {
+                return (iter, true);
+            }
+            self.active[release] = 0;
+        }
+        (iter, false)
+    }
+
+    fn collect_free(&mut self) -> usize {
+        let mut nf = 0;
+        let mut j = 0;
+        while j < N {
+            if self.active[j] == 0 {
+                self.free[nf] = j;
+                nf += 1;
+            }
+            j += 1;
+        }
+        nf
+    }
+
+    /// Cholesky of H restricted to the free set; false if not positive definite.
+    fn factor_free(&mut self, nf: usize) -> bool {
+        let mut r = 0;
+        while r < nf {
+            let mut c = 0;
+            while c <= r {
+                let mut s = self.h[self.free[r]][self.free[c]];
+                let mut k = 0;
+                while k < c {
+                    s -= self.chol[r][k] * self.chol[c][k];
+                    k += 1;
+                }
+                if r == c {
+                    if s <= 0.0 || s.is_nan() {
+                        return false;
+                    }
+                    self.chol[r][r] = libm::sqrt(s);
+                } else {
+                    self.chol[r][c] = s / self.chol[c][c];
+                }
+                c += 1;
+            }
+            r += 1;
+        }
+        true
+    }
+
+    /// newton = minimizer over the free variables with active ones at their bounds.
+    fn free_newton_point(&mut self, nf: usize) {
+        let mut j = 0;
+        while j < N {
+            self.newton[j] = self.x[j];
+            j += 1;
+        }
+        let mut r = 0;
+        while r < nf {
+            let row = self.free[r];
+            let mut s = -self.g[row];
+            let mut c = 0;
+            while c < N {
+                if self.active[c] != 0 {
+                    s -= self.h[row][c] * self.x[c];
+                }
+                c += 1;
+            }
+            self.rhs[r] = s;
+            r += 1;
+        }
+        // Forward then backward substitution with L L'.
+        let mut r = 0;
+        while r < nf {
+            let mut s = self.rhs[r];
+            let mut k = 0;
+            while k < r {
+                s -= self.chol[r][k] * self.rhs[k];
+                k += 1;
+            }
+            self.rhs[r] = s / self.chol[r][r];
+            r += 1;
+        }
+        let mut r = nf;
+        while r > 0 {
+            r -= 1;
+            let mut s = self.rhs[r];
+            let mut k = r + 1;
+            while k < nf {
+                s -= self.chol[k][r] * self.rhs[k];
+                k += 1;
+            }
+            self.rhs[r] = s / self.chol[r][r];
+        }
+        let mut r = 0;
+        while r < nf {
+            self.newton[self.free[r]] = self.rhs[r];
+            r += 1;
+        }
+    }
+}
+
+fn clamp_u(u: f64) -> f64 {
+    if u > U_MAX_T_PER_M {
+        U_MAX_T_PER_M
+    } else if u < -U_MAX_T_PER_M {
+        -U_MAX_T_PER_M
+    } else {
+        u
+    }
+}
+
+fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
+    let f = (v - axis.start) / axis.step;
+    // NaN fails both comparisons and is rejected here.
+    if !(f > -0.5 && f < axis.count as f64 - 0.5) {
+        return None;
+    }
+    Some(libm::round(f) as usize)
+}
+
+/// Fills `out` with the stored plan tail for relative state `e`; None when
+/// `e` is outside the index or its cell has no plan.
+pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
+    let mut flat = 0usize;
+    let mut j = 0;
+    while j < NX {
+        let axis = if j % 2 == 0 {
+            &INDEX_POSITION_AXIS
+        } else {
+            &INDEX_SPEED_AXIS
+        };
+        flat = flat * axis.count + axis_nearest(axis, e[j])?;
+        j += 1;
+    }
+    let cell = INDEX[flat];
+    let plan = (cell >> 16) as usize;
+    let offset = (cell & 0xffff) as usize;
+    if plan >= PLAN_COUNT {
+        return None;
+    }
+    let mut i = 0;
+    while i < K {
+        out[i] = if offset + i < K {
+            PLAN_U[plan][offset + i]
+        } else {
+            0.0
+        };
+        i += 1;
+    }
+    Some(())
+}
+
+/// One RK4 step of capsule `i` with forward sensitivities over `h` seconds.
+#[inline]
+fn rk4_capsule(i: usize, x: f64, v: f64, u: f64, h: f64) -> ([f64; 2], [f64; 4], [f64; 2]) {
+    const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
+    const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
+    let mut k_prev_v = 0.0;
+    let mut dk_prev = [0.0f64; 2]; // d k_prev[v] / d (x0, v0)
+    let mut dku_prev = 0.0;
+    let mut next = [x, v];
+    let mut a = [1.0, 0.0, 0.0, 1.0];
+    let mut b = [0.0, 0.0];
+    let mut stage = 0;
+    while stage < 4 {
+        let ch = C[stage] * h;
+        let vs = v + ch * k_prev_v;
+        let dv = [ch * dk_prev[0], 1.0 + ch * dk_prev[1]];
+        let dvu = ch * dku_prev;
+        let (acc, slope) = drag(i, vs);
+        let kv = acc + G[i] * u;
+        let wh = W[stage] * h / 6.0;
+        next[0] += wh * vs;
+        next[1] += wh * kv;
+        a[0] += wh * dv[0];
+        a[1] += wh * dv[1];
+        a[2] += wh * slope * dv[0];
+        a[3] += wh * slope * dv[1];
+        b[0] += wh * dvu;
+        b[1] += wh * (slope * dvu + G[i]);
+        k_prev_v = kv;
+        dk_prev = [slope * dv[0], slope * dv[1]];
+        dku_prev = slope * dvu + G[i];
+        stage += 1;
+    }
+    (next, a, b)
+}
+
+/// One controller sample (RK4_SUBSTEPS sub-steps) of capsule `i`, with Jacobians.
+#[inline]
+fn sample_capsule(i: usize, x: f64, v: f64, u: f64) -> ([f64; 2], [f64; 4], [f64; 2]) {
+    let h = DT_S / RK4_SUBSTEPS as f64;
+    let mut s = [x, v];
+    let mut a = [1.0, 0.0, 0.0, 1.0];
+    let mut b = [0.0, 0.0];
+    let mut n = 0;
+    while n < RK4_SUBSTEPS {
+        let (next, sa, sb) = rk4_capsule(i, s[0], s[1], u, h);
+        a = [
+            sa[0] * a[0] + sa[1] * a[2],
+            sa[0] * a[1] + sa[1] * a[3],
+            sa[2] * a[0] + sa[3] * a[2],
+            sa[2] * a[1] + sa[3] * a[3],
+        ];
+        b = [
+            sa[0] * b[0] + sa[1] * b[1] + sb[0],
+            sa[2] * b[0] + sa[3] * b[1] + sb[1],
+        ];
+        s = next;
+        n += 1;
+    }
+    (s, a, b)
+}
+
+fn stage_cost(e: &[f64; NX], u: f64) -> f64 {
+    let mut c = R * u * u;
+    let mut r = 0;
+    while r < NX {
+        c += Q[r] * e[r] * e[r];
+        r += 1;
+    }
+    c
+}
+
+fn terminal_cost(e: &[f64; NX]) -> f64 {
+    let mut c = 0.0;
+    let mut r = 0;
+    while r < NX {
+        c += P[r] * e[r] * e[r];
+        r += 1;
+    }
+    c
+}
+
+/// Nonlinear cost of `plan` from `e0` over K samples (no Jacobians).
+pub fn rollout_cost(e0: &[f64; NX], plan: &[f64; K]) -> f64 {
+    let mut e = *e0;
+    let mut cost = 0.0;
+    let mut k = 0;
+    while k < K {
+        cost += stage_cost(&e, plan[k]);
+        let mut i = 0;
+        while i < M {
+            let (next, _, _) = sample_capsule(i, e[2 * i], e[2 * i + 1], plan[k]);
+            e[2 * i] = next[0];
+            e[2 * i + 1] = next[1];
+            i += 1;
+        }
+        k += 1;
+    }
+    let total = cost + terminal_cost(&e);
+    if total.is_nan() {
+        f64::INFINITY
+    } else {
+        total
+    }
+}
+
+fn rollout_with_jacobians(
+    e0: &[f64; NX],
+    plan: &[f64; K],
+    states: &mut [[f64; NX]; K + 1],
+    jac: &mut [StepJacobian; K],
+) {
+    states[0] = *e0;
+    let mut k = 0;
+    while k < K {
+        let mut i = 0;
+        while i < M {
+            let (next, a, b) = sample_capsule(i, states[k][2 * i], states[k][2 * i + 1], plan[k]);
+            states[k + 1][2 * i] = next[0];
+            states[k + 1][2 * i + 1] = next[1];
+            jac[k].a[i] = a;
+            jac[k].b[i] = b;
+            i += 1;
+        }
+        k += 1;
+    }
+}
+
+/// Predicted relative state after applying `plan[..samples]` from `e0`.
+pub fn predict(e0: &[f64; NX], plan: &[f64; K], samples: usize) -> [f64; NX] {
+    let mut e = *e0;
+    let mut k = 0;
+    while k < samples && k < K {
+        let mut i = 0;
+        while i < M {
+            let (next, _, _) = sample_capsule(i, e[2 * i], e[2 * i + 1], plan[k]);
+            e[2 * i] = next[0];
+            e[2 * i + 1] = next[1];
+            i += 1;
+        }
+        k += 1;
+    }
+    e
+}
+
+/// One capsule over `duration_s` at constant `u` with its 2x2 Jacobian.
+pub fn capsule_transition(i: usize, xv: [f64; 2], u: f64, duration_s: f64) -> ([f64; 2], [f64; 4]) {
+    let mut s = xv;
+    let mut a = [1.0, 0.0, 0.0, 1.0];
+    if !(duration_s > 0.0) || i >= M {
+        return (s, a);
+    }
+    let max_h = DT_S / RK4_SUBSTEPS as f64;
+    let mut steps = libm::ceil(duration_s / max_h) as usize;
+    if steps > MAX_PREDICTION_STEPS {
+        steps = MAX_PREDICTION_STEPS;
+    }
+    let h = duration_s / steps as f64;
+    let mut n = 0;
+    while n < steps {
+        let (next, sa, _) = rk4_capsule(i, s[0], s[1], u, h);
+        a = [
+            sa[0] * a[0] + sa[1] * a[2],
+            sa[0] * a[1] + sa[1] * a[3],
+            sa[2] * a[0] + sa[3] * a[2],
+            sa[2] * a[1] + sa[3] * a[3],
+        ];
+        s = next;
+        n += 1;
+    }
+    (s, a)
+}
+
+/// Upper bound on RK4 sub-steps of one prediction (bounds the compute time
+/// whatever duration a caller passes).
+pub const MAX_PREDICTION_STEPS: usize = 4096;
+
+impl PlanSolver<NX, K> for Solver {
+    const M: usize = M;
+    const N: usize = N;
+    const DT_S: f64 = DT_S;
+    const U_MAX_T_PER_M: f64 = U_MAX_T_PER_M;
+    const POSITION_BOUND_M: f64 = POSITION_BOUND_M;
+    const SPEED_BOUND_M_PER_S: f64 = SPEED_BOUND_M_PER_S;
+    const TRACKING_TIME_S: f64 = TRACKING_TIME_S;
+    const EXTRA_DELAY_S: f64 = EXTRA_DELAY_S;
+    const POSITION_NOISE_M: f64 = POSITION_NOISE_M;
+    const L_F: f64 = L_F;
+    const L_L: f64 = L_L;
+    const L_V: f64 = L_V;
+    const X_DIAMETER: f64 = X_DIAMETER;
+    const SWITCHING_SIGMA: f64 = SWITCHING_SIGMA;
+    const QP_MAX_ITERATIONS: usize = QP_MAX_ITERATIONS;
+    const QP_ITERATIONS_MEASURED_OFFLINE: usize = QP_ITERATIONS_MEASURED_OFFLINE;
+    const TABLE_BYTES: usize = TABLE_BYTES;
+
+    fn new() -> Self {
+        Solver::new()
+    }
+    fn reset(&mut self) {
+        Solver::reset(self)
+    }
+    fn shift(&mut self, samples: usize) {
+        Solver::shift(self, samples)
+    }
+    fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
+        Solver::solve(self, e)
+    }
+    fn plan(&self) -> &[f64; K] {
+        Solver::plan(self)
+    }
+    fn covers_from_rest(e: &[f64; NX]) -> bool {
+        Solver::covers_from_rest(e)
+    }
+    fn stage_cost(e: &[f64; NX], u: f64) -> f64 {
+        stage_cost(e, u)
+    }
+    fn predict_plan(e: &[f64; NX], plan: &[f64; K], samples: usize) -> [f64; NX] {
+        predict(e, plan, samples)
+    }
+    fn predict_constant(e: &[f64; NX], u: f64, duration_s: f64) -> [f64; NX] {
+        let mut out = *e;
+        let mut i = 0;
+        while i < M {
+            let (next, _) = capsule_transition(i, [e[2 * i], e[2 * i + 1]], u, duration_s);
+            out[2 * i] = next[0];
+            out[2 * i + 1] = next[1];
+            i += 1;
+        }
+        out
+    }
+    fn capsule_transition(i: usize, xv: [f64; 2], u: f64, duration_s: f64) -> ([f64; 2], [f64; 4]) {
+        capsule_transition(i, xv, u, duration_s)
+    }
+}

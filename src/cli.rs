@@ -1,0 +1,209 @@
+//! Command-line arguments of `capsule-mpc`, as plain structs so that the
+//! modules implementing each subcommand can take them without clap plumbing.
+
+use crate::plant::DisturbanceLevel;
+use anyhow::{bail, Result};
+use capsule_mpc_generator::config::{Config, ConfigError};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Parser)]
+#[command(
+    name = "capsule-mpc",
+    version,
+    about = "MPC steering of several magnetic capsules with one shared MRI gradient"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Clone, Subcommand)]
+pub enum Command {
+    /// Print the derived model constants and the config as understood.
+    Inspect(InspectArgs),
+    /// Run one closed-loop simulation.
+    Simulate(SimulateArgs),
+    /// Solve the offline tables and emit the fixed-size solver crate.
+    Generate(GenerateArgs),
+    /// Time the online solver on random states.
+    Bench(BenchArgs),
+    /// Produce the figures of the report.
+    Figures(FiguresArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct InspectArgs {
+    /// Config file (TOML); the embedded paper config when absent.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Reference scenarios of the paper (targets in cm, see NOTES.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Scenario {
+    /// Both capsules the same way: (2 cm, 0, 3 cm, 0).
+    #[value(name = "A", alias = "a")]
+    A,
+    /// Opposite ways: (2 cm, 0, -1 cm, 0).
+    #[value(name = "C", alias = "c")]
+    C,
+}
+
+impl Scenario {
+    /// Target state [x1, v1, x2, v2] in m and m/s.
+    pub fn target_state(self) -> Vec<f64> {
+        match self {
+            Scenario::A => vec![0.02, 0.0, 0.03, 0.0],
+            Scenario::C => vec![0.02, 0.0, -0.01, 0.0],
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Scenario::A => "A",
+            Scenario::C => "C",
+        }
+    }
+}
+
+/// When the controller gets measurements and may actuate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Sampling {
+    /// Exact state every sample, no tracking time (an upper bound on quality).
+    Ideal,
+    /// Track, then actuate for a fixed time, every period.
+    Constant,
+    /// Actuate until the switching rule asks for a new measurement.
+    Variable,
+}
+
+impl Sampling {
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampling::Ideal => "ideal",
+            Sampling::Constant => "constant",
+            Sampling::Variable => "variable",
+        }
+    }
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct SimulateArgs {
+    /// Config file (TOML); the embedded paper config when absent.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Reference scenario (default A).
+    #[arg(long, value_enum, conflicts_with = "target")]
+    pub scenario: Option<Scenario>,
+    /// Explicit target state x1,v1,x2,v2,... in m and m/s.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        value_name = "X1,V1,X2,V2,..."
+    )]
+    pub target: Option<Vec<f64>>,
+    #[arg(long, value_enum, default_value = "variable")]
+    pub sampling: Sampling,
+    #[arg(long, value_enum, default_value = "paper")]
+    pub disturbance: DisturbanceLevel,
+    /// Seed of the disturbance and the measurement noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Simulated time, s.
+    #[arg(long, default_value_t = 3.0, value_parser = positive_seconds)]
+    pub duration: f64,
+    /// Write the run report (JSON) here.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Write plots into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+}
+
+impl SimulateArgs {
+    /// The target state for `state_count` states: `--target` if given, else
+    /// the scenario's (default A). Errors on a wrong length or non-finite value.
+    pub fn target_state(&self, state_count: usize) -> Result<Vec<f64>> {
+        let target = match &self.target {
+            Some(t) => t.clone(),
+            None => self.scenario.unwrap_or(Scenario::A).target_state(),
+        };
+        if target.len() != state_count {
+            bail!(
+                "target has {} entries; the config has {state_count} states (x, v per capsule)",
+                target.len()
+            );
+        }
+        if target.iter().any(|v| !v.is_finite()) {
+            bail!("target {target:?} is not finite");
+        }
+        Ok(target)
+    }
+
+    /// "A", "C" or "custom" (for reports).
+    pub fn scenario_name(&self) -> &'static str {
+        match (&self.target, self.scenario) {
+            (Some(_), _) => "custom",
+            (None, s) => s.unwrap_or(Scenario::A).name(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct GenerateArgs {
+    /// Config file (TOML); the embedded paper config when absent.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Output directory of the generated crate.
+    #[arg(long, value_name = "DIR", default_value = "generated")]
+    pub out: PathBuf,
+    /// Do not write: fail if the output differs from what would be generated.
+    #[arg(long)]
+    pub check: bool,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchArgs {
+    /// Number of random states to solve from.
+    #[arg(long, default_value_t = 1000)]
+    pub states: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write the timings (JSON) here.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct FiguresArgs {
+    /// Output directory.
+    #[arg(long, value_name = "DIR", default_value = "figures")]
+    pub out: PathBuf,
+    /// Simulated time per run, s.
+    #[arg(long, default_value_t = 3.0, value_parser = positive_seconds)]
+    pub duration: f64,
+}
+
+/// clap value parser: a finite positive number of seconds.
+fn positive_seconds(text: &str) -> std::result::Result<f64, String> {
+    let v: f64 = text.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{v} is not a positive, finite number of seconds"))
+    }
+}
+
+/// Loads and validates `path`, or the embedded default when `None`.
+pub fn load_config(path: Option<&Path>) -> std::result::Result<Config, ConfigError> {
+    match path {
+        Some(p) => Config::from_file(p),
+        None => Ok(Config::embedded_default()),
+    }
+}

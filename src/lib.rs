@@ -1,0 +1,8 @@
+//! capsule-mpc: closed-loop simulation, metrics and reports around the
+//! generated MPC solver.
+
+pub mod cli;
+pub mod inspect;
+pub mod metrics;
+pub mod plant;
+pub mod report;

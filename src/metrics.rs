@@ -1,0 +1,219 @@
+//! Closed-loop quality metrics computed from the plant's records, so that every
+//! controller and sampling scheme is scored by the same rules.
+
+use crate::plant::{Phase, Record};
+use anyhow::{bail, Result};
+use serde::{Deserialize, Serialize};
+
+/// Settling band on each position error, m.
+pub const SETTLE_POSITION_TOL_M: f64 = 1e-3;
+/// Settling band on each speed, m/s (strict: |v| < this).
+pub const SETTLE_SPEED_TOL_M_PER_S: f64 = 5e-3;
+
+/// Summary of one closed-loop run (the `metrics` object of `simulate --json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Earliest record time from which every position stays within
+    /// [`SETTLE_POSITION_TOL_M`] of its target and every |speed| below
+    /// [`SETTLE_SPEED_TOL_M_PER_S`] until the end; `null` if never.
+    pub settle_time_s: Option<f64>,
+    /// Largest |x_i - target_i| over capsules at the last row, m.
+    pub final_position_error_m: f64,
+    /// Largest |u| applied, T/m.
+    pub max_abs_u: f64,
+    /// Fraction of the run time spent actuating (weighted by row durations).
+    pub duty_cycle: f64,
+    /// Rows with some |x_i - target_i| > position bound or |v_i| > speed bound.
+    pub state_bound_violations: usize,
+    /// Longest controller computation for one step, ns (measured by the caller).
+    pub max_step_compute_ns: u64,
+}
+
+/// True when every capsule of `x` is inside the settling band around `target`.
+fn in_settle_band(x: &[f64], target: &[f64]) -> bool {
+    x.chunks_exact(2)
+        .zip(target.chunks_exact(2))
+        .all(|(xv, tv)| {
+            (xv[0] - tv[0]).abs() <= SETTLE_POSITION_TOL_M && xv[1].abs() < SETTLE_SPEED_TOL_M_PER_S
+        })
+}
+
+impl Metrics {
+    /// Scores `records` against the target state `target` ([x1, v1, x2, v2, ...];
+    /// only its positions are used). Errors when a row's state length differs
+    /// from the target's or is odd.
+    pub fn compute(
+        records: &[Record],
+        target: &[f64],
+        position_bound_m: f64,
+        speed_bound_m_per_s: f64,
+        max_step_compute_ns: u64,
+    ) -> Result<Metrics> {
+        if target.len() % 2 == 1 {
+            bail!(
+                "target has {} entries; an even number (x, v per capsule) is needed",
+                target.len()
+            );
+        }
+        if let Some(r) = records.iter().find(|r| r.x.len() != target.len()) {
+            bail!(
+                "record at t = {} s has {} states but the target has {}",
+                r.t_s,
+                r.x.len(),
+                target.len()
+            );
+        }
+
+        // Settling: the row after the last one outside the band.
+        let settle_time_s = match records.iter().rposition(|r| !in_settle_band(&r.x, target)) {
+            None => records.first().map(|r| r.t_s),
+            Some(last_out) => records.get(last_out + 1).map(|r| r.t_s),
+        };
+
+        let final_position_error_m = records.last().map_or(0.0, |r| {
+            r.x.iter()
+                .step_by(2)
+                .zip(target.iter().step_by(2))
+                .map(|(x, t)| (x - t).abs())
+                .fold(0.0, f64::max)
+        });
+
+        let max_abs_u = records
+            .iter()
+            .map(|r| r.u_t_per_m.abs())
+            .fold(0.0, f64::max);
+
+        let (mut actuate_s, mut total_s) = (0.0, 0.0);
+        for pair in records.windows(2) {
+            let dt_s = pair[1].t_s - pair[0].t_s;
+            total_s += dt_s;
+            if pair[0].phase == Phase::Actuate {
+                actuate_s += dt_s;
+            }
+        }
+        let duty_cycle = if total_s > 0.0 {
+            actuate_s / total_s
+        } else {
+            0.0
+        };
+
+        let state_bound_violations = records
+            .iter()
+            .filter(|r| {
+                r.x.chunks_exact(2)
+                    .zip(target.chunks_exact(2))
+                    .any(|(xv, tv)| {
+                        (xv[0] - tv[0]).abs() > position_bound_m
+                            || xv[1].abs() > speed_bound_m_per_s
+                    })
+            })
+            .count();
+
+        Ok(Metrics {
+            settle_time_s,
+            final_position_error_m,
+            max_abs_u,
+            duty_cycle,
+            state_bound_violations,
+            max_step_compute_ns,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(t_s: f64, x1: f64, v1: f64, u: f64, phase: Phase) -> Record {
+        Record {
+            t_s,
+            x: vec![x1, v1, 0.0, 0.0],
+            u_t_per_m: u,
+            phase,
+            d: vec![0.0; 4],
+        }
+    }
+
+    const TARGET: [f64; 4] = [0.02, 0.0, 0.0, 0.0];
+
+    #[test]
+    fn settle_time_is_after_the_last_excursion() {
+        // Enters the band at 0.2, leaves it at 0.3 (1.5 mm off), back at 0.4.
+        let xs = [0.0, 0.01, 0.0195, 0.0205, 0.0215, 0.0201, 0.02];
+        let records: Vec<Record> = xs
+            .iter()
+            .enumerate()
+            .map(|(k, &x)| row(0.1 * k as f64, x, 0.0, 0.0, Phase::Track))
+            .collect();
+        let m = Metrics::compute(&records, &TARGET, 0.1, 0.5, 0).unwrap();
+        assert_eq!(m.settle_time_s, Some(0.5));
+        assert!((m.final_position_error_m - 0.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn speed_keeps_a_run_unsettled() {
+        // In position all along but moving at 6 mm/s at the end: never settled.
+        let records = vec![
+            row(0.0, 0.02, 0.0, 0.0, Phase::Track),
+            row(0.1, 0.02, 0.006, 0.0, Phase::Track),
+        ];
+        let m = Metrics::compute(&records, &TARGET, 0.1, 0.5, 0).unwrap();
+        assert_eq!(m.settle_time_s, None);
+        let json = serde_json::to_value(&m).unwrap();
+        assert!(json["settle_time_s"].is_null());
+    }
+
+    #[test]
+    fn settled_from_the_start() {
+        let records = vec![
+            row(0.0, 0.0205, 0.001, 0.0, Phase::Track),
+            row(0.1, 0.02, 0.0, 0.0, Phase::Track),
+        ];
+        let m = Metrics::compute(&records, &TARGET, 0.1, 0.5, 0).unwrap();
+        assert_eq!(m.settle_time_s, Some(0.0));
+    }
+
+    #[test]
+    fn duty_cycle_is_time_weighted_and_bounds_are_counted() {
+        let records = vec![
+            row(0.0, 0.0, 0.0, 0.04, Phase::Actuate),
+            row(0.03, 0.0, 0.6, 0.0, Phase::Track), // speed above the 0.5 bound
+            row(0.05, -0.09, 0.0, -0.03, Phase::Actuate), // 0.11 m from target
+            row(0.06, 0.02, 0.0, 0.0, Phase::Track),
+        ];
+        let m = Metrics::compute(&records, &TARGET, 0.1, 0.5, 1234).unwrap();
+        assert!(
+            (m.duty_cycle - 0.04 / 0.06).abs() < 1e-12,
+            "{}",
+            m.duty_cycle
+        );
+        assert_eq!(m.state_bound_violations, 2);
+        assert!((m.max_abs_u - 0.04).abs() < 1e-15);
+        assert_eq!(m.max_step_compute_ns, 1234);
+        let json = serde_json::to_value(&m).unwrap();
+        let keys: Vec<&str> = json
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(|k| k.as_str())
+            .collect();
+        for k in [
+            "settle_time_s",
+            "final_position_error_m",
+            "max_abs_u",
+            "duty_cycle",
+            "state_bound_violations",
+            "max_step_compute_ns",
+        ] {
+            assert!(keys.contains(&k), "{k}");
+        }
+        assert_eq!(keys.len(), 6);
+    }
+
+    #[test]
+    fn mismatched_target_is_an_error() {
+        let records = vec![row(0.0, 0.0, 0.0, 0.0, Phase::Track)];
+        assert!(Metrics::compute(&records, &[0.0, 0.0], 0.1, 0.5, 0).is_err());
+        assert!(Metrics::compute(&records, &[0.0; 3], 0.1, 0.5, 0).is_err());
+    }
+}

@@ -1,0 +1,135 @@
+//! The binary's contract on bad configs: non-zero exit, one `error:` line that
+//! names the field, no panic; and `inspect --json` on the default config.
+
+use capsule_mpc_generator::config::DEFAULT_CONFIG_TOML;
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_capsule-mpc"));
+    // A backtrace request must not turn an error into a multi-line dump.
+    c.env("RUST_BACKTRACE", "1");
+    c
+}
+
+fn inspect_with(toml: &str) -> Output {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.toml");
+    std::fs::write(&path, toml).unwrap();
+    bin()
+        .args(["inspect", "--config"])
+        .arg(&path)
+        .output()
+        .unwrap()
+}
+
+fn assert_one_line_error(out: &Output, needle: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "exit status {:?}, stderr {stderr}",
+        out.status
+    );
+    assert_eq!(out.status.code(), Some(1), "stderr {stderr}");
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(lines.len(), 1, "stderr must be one line: {stderr:?}");
+    assert!(lines[0].starts_with("error: "), "{stderr:?}");
+    assert!(lines[0].contains(needle), "`{needle}` not in {stderr:?}");
+    assert!(
+        !stderr.contains("panicked") && !stderr.contains("RUST_BACKTRACE"),
+        "{stderr:?}"
+    );
+    assert!(out.stdout.is_empty(), "nothing on stdout on error");
+}
+
+fn edited(from: &str, to: &str) -> String {
+    assert!(
+        DEFAULT_CONFIG_TOML.contains(from),
+        "default config lacks `{from}`"
+    );
+    DEFAULT_CONFIG_TOML.replacen(from, to, 1)
+}
+
+#[test]
+fn negative_radius() {
+    let out = inspect_with(&edited(
+        "sphere_radius_m = 0.0015",
+        "sphere_radius_m = -0.0015",
+    ));
+    assert_one_line_error(&out, "capsule[0].sphere_radius_m");
+}
+
+#[test]
+fn capsule_smaller_than_sphere() {
+    let out = inspect_with(&edited(
+        "capsule_radius_m = 0.0045",
+        "capsule_radius_m = 0.001",
+    ));
+    assert_one_line_error(&out, "capsule[0].capsule_radius_m");
+}
+
+#[test]
+fn nan_value() {
+    let out = inspect_with(&edited("sphere_radius_m = 0.0030", "sphere_radius_m = nan"));
+    assert_one_line_error(&out, "capsule[1].sphere_radius_m");
+}
+
+#[test]
+fn zero_capsules() {
+    let rest = DEFAULT_CONFIG_TOML.split("[fluid]").nth(1).unwrap();
+    let out = inspect_with(&format!("capsule = []\n[fluid]{rest}"));
+    assert_one_line_error(&out, "`capsule`");
+}
+
+#[test]
+fn unknown_field() {
+    let out = inspect_with(&edited("[fluid]", "[fluid]\ntemperature_k = 310.0"));
+    assert_one_line_error(&out, "temperature_k");
+}
+
+#[test]
+fn missing_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("does-not-exist.toml");
+    let out = bin()
+        .args(["inspect", "--config"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert_one_line_error(&out, "does-not-exist.toml");
+}
+
+#[test]
+fn inspect_json_on_the_default() {
+    let out = bin().args(["inspect", "--json"]).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let g: Vec<f64> = serde_json::from_value(v["g"].clone()).unwrap();
+    let b: Vec<f64> = serde_json::from_value(v["b"].clone()).unwrap();
+    assert_eq!(g.len(), 2);
+    for gi in &g {
+        assert!((gi - 173.25).abs() / 173.25 < 1e-3, "g = {gi}");
+    }
+    assert!((b[0] - 134.7).abs() / 134.7 < 1e-3, "b1 = {}", b[0]);
+    assert!((b[1] - 16.84).abs() / 16.84 < 1e-3, "b2 = {}", b[1]);
+    let capsules = v["capsules"].as_array().unwrap();
+    assert_eq!(capsules.len(), 2);
+    for (c, key) in capsules.iter().zip(["small", "large"]) {
+        assert_eq!(c["name"], key);
+        for field in [
+            "g",
+            "b",
+            "mass_kg",
+            "terminal_speed_m_per_s",
+            "reynolds_at_terminal_speed",
+        ] {
+            assert!(c[field].as_f64().is_some_and(f64::is_finite), "{field}");
+        }
+    }
+    assert!((capsules[0]["terminal_speed_m_per_s"].as_f64().unwrap() - 0.227).abs() < 1e-3);
+    assert!(v["lipschitz_f"].as_f64().unwrap() >= 1.0);
+    assert_eq!(v["config"]["capsule"].as_array().unwrap().len(), 2);
+}
