@@ -124,6 +124,22 @@ pub struct SimulateArgs {
     /// Write plots into this directory.
     #[arg(long, value_name = "DIR")]
     pub plot: Option<PathBuf>,
+    /// Which generated controller: the product's (`default`) or the paper's NMPC.
+    #[arg(long, value_enum, default_value = "default")]
+    pub preset: crate::closed_loop::Preset,
+    /// Switching rule for `--sampling variable`.
+    #[arg(long, value_enum, default_value = "tight")]
+    pub switching: SwitchingArg,
+    /// Solve from the measured state instead of predicting through the
+    /// tracking time and delay (the paper's way).
+    #[arg(long)]
+    pub no_delay_compensation: bool,
+    /// Lose every N-th tracking frame.
+    #[arg(long, value_name = "N")]
+    pub lose_every: Option<usize>,
+    /// Extra compute/transfer delay after tracking, s (overrides the config).
+    #[arg(long, value_name = "S")]
+    pub extra_delay: Option<f64>,
 }
 
 impl SimulateArgs {
@@ -166,6 +182,10 @@ pub struct GenerateArgs {
     /// Do not write: fail if the output differs from what would be generated.
     #[arg(long)]
     pub check: bool,
+
+    /// Re-emit from the tables already in `--out` (they must match the config).
+    #[arg(long)]
+    pub reuse_tables: bool,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -205,5 +225,23 @@ pub fn load_config(path: Option<&Path>) -> std::result::Result<Config, ConfigErr
     match path {
         Some(p) => Config::from_file(p),
         None => Ok(Config::embedded_default()),
+    }
+}
+
+/// Switching rule choice on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SwitchingArg {
+    /// Local bounds along the plan (see runtime::switching).
+    Tight,
+    /// Condition (17) with the paper's worst-case constants.
+    Paper,
+}
+
+impl From<SwitchingArg> for capsule_mpc_runtime::controller::SwitchingRule {
+    fn from(s: SwitchingArg) -> Self {
+        match s {
+            SwitchingArg::Tight => capsule_mpc_runtime::controller::SwitchingRule::Tight,
+            SwitchingArg::Paper => capsule_mpc_runtime::controller::SwitchingRule::Paper,
+        }
     }
 }

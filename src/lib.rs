@@ -2,6 +2,8 @@
 //! generated MPC solver.
 
 pub mod cli;
+pub mod closed_loop;
+pub mod generate_cmd;
 pub mod inspect;
 pub mod metrics;
 pub mod plant;

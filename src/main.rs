@@ -41,8 +41,14 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             capsule_mpc::inspect::run(&args, &mut stdout.lock())?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Simulate(_) => not_yet("simulate"),
-        Command::Generate(_) => not_yet("generate"),
+        Command::Simulate(args) => {
+            capsule_mpc::closed_loop::simulate_cli(&args)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Generate(args) => {
+            capsule_mpc::generate_cmd::run(&args)?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Bench(_) => not_yet("bench"),
         Command::Figures(_) => not_yet("figures"),
     }

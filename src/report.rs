@@ -76,6 +76,9 @@ pub struct RunReport {
     /// Disturbance actually applied per row (SI), for audits of the bound.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub d: Option<Vec<Vec<f64>>>,
+    /// Cycles in which the controller applied its fallback braking law.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fallback_cycles: Option<usize>,
 }
 
 impl RunReport {
@@ -99,6 +102,7 @@ impl RunReport {
             metrics,
             scenario: None,
             sampling: None,
+            fallback_cycles: None,
             disturbance: None,
             seed: None,
             d: None,

@@ -56,8 +56,7 @@ pub mod spec {
     /// ||2 alpha||, the diameter of the state set X.
     pub const X_DIAMETER: f64 = 1.4422205101855958;
     /// SHA-256 of the config this module was generated from.
-    pub const CONFIG_SHA256: &str =
-        "8f003bac603be797c2fdecb1127d419f8439a7d1003137b1bf156ea18ddec85b";
+    pub const CONFIG_SHA256: &str = "8f003bac603be797c2fdecb1127d419f8439a7d1003137b1bf156ea18ddec85b";
     /// Drag acceleration of capsule `i` at speed `v` (m/s^2) and its slope d a / d v.
     #[inline]
     pub fn drag(i: usize, v: f64) -> (f64, f64) {
@@ -383,8 +382,9 @@ pub mod solver {
                     let mut b = a;
                     while b < N {
                         let sb = &self.sens[N][b];
-                        qp.h[a][b] += sa[xi] * (hh[0] * sb[xi] + hh[1] * sb[vi])
-                            + sa[vi] * (hh[2] * sb[xi] + hh[3] * sb[vi]);
+                        qp.h[a][b]
+                            += sa[xi] * (hh[0] * sb[xi] + hh[1] * sb[vi])
+                                + sa[vi] * (hh[2] * sb[xi] + hh[3] * sb[vi]);
                         b += 1;
                     }
                     i += 1;
@@ -627,11 +627,7 @@ pub mod solver {
         let mut flat = 0usize;
         let mut j = 0;
         while j < NX {
-            let axis = if j % 2 == 0 {
-                &INDEX_POSITION_AXIS
-            } else {
-                &INDEX_SPEED_AXIS
-            };
+            let axis = if j % 2 == 0 { &INDEX_POSITION_AXIS } else { &INDEX_SPEED_AXIS };
             flat = flat * axis.count + axis_nearest(axis, e[j])?;
             j += 1;
         }
@@ -643,18 +639,20 @@ pub mod solver {
         }
         let mut i = 0;
         while i < K {
-            out[i] = if offset + i < K {
-                PLAN_U[plan][offset + i]
-            } else {
-                0.0
-            };
+            out[i] = if offset + i < K { PLAN_U[plan][offset + i] } else { 0.0 };
             i += 1;
         }
         Some(())
     }
     /// One RK4 step of capsule `i` with forward sensitivities over `h` seconds.
     #[inline]
-    fn rk4_capsule(i: usize, x: f64, v: f64, u: f64, h: f64) -> ([f64; 2], [f64; 4], [f64; 2]) {
+    fn rk4_capsule(
+        i: usize,
+        x: f64,
+        v: f64,
+        u: f64,
+        h: f64,
+    ) -> ([f64; 2], [f64; 4], [f64; 2]) {
         const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
         const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
         let mut k_prev_v = 0.0;
@@ -689,7 +687,12 @@ pub mod solver {
     }
     /// One controller sample (RK4_SUBSTEPS sub-steps) of capsule `i`, with Jacobians.
     #[inline]
-    fn sample_capsule(i: usize, x: f64, v: f64, u: f64) -> ([f64; 2], [f64; 4], [f64; 2]) {
+    fn sample_capsule(
+        i: usize,
+        x: f64,
+        v: f64,
+        u: f64,
+    ) -> ([f64; 2], [f64; 4], [f64; 2]) {
         let h = DT_S / RK4_SUBSTEPS as f64;
         let mut s = [x, v];
         let mut a = [1.0, 0.0, 0.0, 1.0];
@@ -747,11 +750,7 @@ pub mod solver {
             k += 1;
         }
         let total = cost + terminal_cost(&e);
-        if total.is_nan() {
-            f64::INFINITY
-        } else {
-            total
-        }
+        if total.is_nan() { f64::INFINITY } else { total }
     }
     fn rollout_with_jacobians(
         e0: &[f64; NX],
@@ -764,8 +763,12 @@ pub mod solver {
         while k < K {
             let mut i = 0;
             while i < M {
-                let (next, a, b) =
-                    sample_capsule(i, states[k][2 * i], states[k][2 * i + 1], plan[k]);
+                let (next, a, b) = sample_capsule(
+                    i,
+                    states[k][2 * i],
+                    states[k][2 * i + 1],
+                    plan[k],
+                );
                 states[k + 1][2 * i] = next[0];
                 states[k + 1][2 * i + 1] = next[1];
                 jac[k].a[i] = a;
@@ -872,7 +875,12 @@ pub mod solver {
             let mut out = *e;
             let mut i = 0;
             while i < M {
-                let (next, _) = capsule_transition(i, [e[2 * i], e[2 * i + 1]], u, duration_s);
+                let (next, _) = capsule_transition(
+                    i,
+                    [e[2 * i], e[2 * i + 1]],
+                    u,
+                    duration_s,
+                );
                 out[2 * i] = next[0];
                 out[2 * i + 1] = next[1];
                 i += 1;

@@ -11,7 +11,11 @@
 #![no_std]
 #![forbid(unsafe_code)]
 
+// Emitted modules are formatted by prettyplease; keep rustfmt off them so
+// `generate --check` compares exactly what the generator writes.
+#[rustfmt::skip]
 pub mod controller;
+#[rustfmt::skip]
 pub mod paper_preset;
 
 /// Outcome of one solve (separate from errors: every status comes with a

@@ -1,1 +1,36 @@
+//! capsule-mpc runtime: the closed loop that runs at scanner rate.
+//!
+//! In an MRI scanner the gradient coils both track the capsules and push
+//! them, never at once. Each cycle: a tracking phase (u = 0) measures the
+//! positions at its start; the measurement arrives after the tracking time
+//! plus a compute/transfer delay; the controller fuses it into its state
+//! estimate (positions only: velocities are estimated), predicts through
+//! the delay, refines its plan with the generated fixed-size solver, and
+//! decides with the switching rule how many samples to actuate before the
+//! next tracking phase.
+//!
+//! `#![no_std]`, no heap, no `unsafe`: all memory lives in [`Controller`].
+
 #![no_std]
+#![forbid(unsafe_code)]
+
+pub mod controller;
+pub mod estimator;
+pub mod switching;
+
+pub use capsule_mpc_generated as generated;
+pub use controller::{Controller, ControllerSettings, CycleOutput, RuntimeError, RuntimeStatus};
+
+/// The product's default controller for the embedded config.
+pub type DefaultController = Controller<
+    generated::controller::solver::Solver,
+    { generated::controller::spec::NX },
+    { generated::controller::spec::K },
+>;
+
+/// The paper's NMPC taken literally, for comparison.
+pub type PaperController = Controller<
+    generated::paper_preset::solver::Solver,
+    { generated::paper_preset::spec::NX },
+    { generated::paper_preset::spec::K },
+>;

@@ -1,0 +1,449 @@
+//! The scanner-cycle controller: estimator + generated solver + switching
+//! rule + fault handling, in one fixed-size struct.
+
+use crate::estimator::CapsuleFilter;
+use crate::generated::{PlanSolver, SolveReport, SolveStatus};
+use crate::switching::{paper_actuation_samples, tight_actuation_samples, PaperConstants, TightInputs};
+
+/// How the scanner interleaves tracking and actuation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sampling {
+    /// Every sample actuates and the full state is known instantly (the
+    /// paper's nominal idealization).
+    Ideal,
+    /// One actuation sample per tracking phase (Fig. 2a).
+    Constant,
+    /// The switching rule chooses the actuation length (Fig. 2b).
+    Variable,
+}
+
+/// Which switching rule `Sampling::Variable` uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SwitchingRule {
+    /// Condition (17) with the worst-case constants of the paper.
+    Paper,
+    /// The local-bound variant (see [`crate::switching`]).
+    Tight,
+}
+
+/// Settings; defaults come from the generated spec.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControllerSettings {
+    pub sampling: Sampling,
+    pub switching: SwitchingRule,
+    /// Predict the state through tracking + delay before solving (true), or
+    /// solve from the measured state and treat the delay as a disturbance
+    /// (false, the paper's way).
+    pub compensate_delay: bool,
+    /// Tracking phase duration, s.
+    pub tracking_time_s: f64,
+    /// Extra compute/transfer delay after tracking, s.
+    pub extra_delay_s: f64,
+    /// Measurement noise standard deviation, m.
+    pub position_noise_m: f64,
+    /// Disturbance bound gamma, SI (m/s and m/s^2 on the state derivative).
+    pub disturbance_bound: f64,
+    /// Largest actuation length, samples (<= N).
+    pub max_actuation_samples: usize,
+}
+
+/// Normalized innovation squared above which a measurement is rejected
+/// (10 sigma: only gross outliers and wrong data).
+pub const MEASUREMENT_GATE_NIS: f64 = 100.0;
+/// Positions farther than this from the origin are not physical, m.
+pub const MAX_ABS_POSITION_M: f64 = 1.0;
+/// Floor on the estimator's process noise (acceleration PSD, (m/s^2)^2 s):
+/// model error is never exactly zero.
+pub const MIN_ACCEL_PSD: f64 = 1.0e-6;
+
+/// Status of one cycle (the plan is always usable and within |u| <= u_max).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(C)]
+pub enum RuntimeStatus {
+    Ok = 0,
+    /// The state is outside the tables: a bounded braking input is applied.
+    Fallback = 1,
+    /// A QP hit its iteration bound; the best feasible plan was used.
+    IterationLimit = 2,
+    /// The measurement was non-finite or implausible and was ignored.
+    MeasurementRejected = 3,
+    /// No measurement this cycle: the estimate was predicted only.
+    MeasurementLost = 4,
+    /// No target set: zero gradient.
+    NoTarget = 5,
+}
+
+/// Errors of calls with bad arguments (nothing changes when one is returned).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RuntimeError {
+    /// A value was NaN or infinite; names the argument.
+    NonFinite(&'static str),
+    /// A slice had the wrong length; names the argument.
+    WrongLength(&'static str),
+    /// The target cannot be reached from the current state with the stored
+    /// plans (outside the tables' range).
+    TargetOutOfRange,
+    /// A setting is out of its range; names it.
+    BadSetting(&'static str),
+}
+
+/// What one cycle returns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CycleOutput<const K: usize> {
+    /// Gradient per sample, T/m; the first `actuation_samples` are to be played.
+    pub gradients_t_per_m: [f64; K],
+    pub actuation_samples: usize,
+    pub status: RuntimeStatus,
+    /// The solver's report (None for fallback / no target).
+    pub solve: Option<SolveReport>,
+    /// Estimated state at the actuation start (absolute, SI).
+    pub estimate: [f64; K2],
+}
+
+/// Room for the estimate in [`CycleOutput`] (2 x the maximum capsule count).
+pub const K2: usize = 16;
+
+/// The closed loop's whole memory.
+#[derive(Debug, Clone)]
+pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
+    solver: S,
+    settings: ControllerSettings,
+    filters: [CapsuleFilter; NX],
+    target: [f64; NX],
+    has_target: bool,
+    /// Plan samples applied since the last solve.
+    applied_samples: usize,
+    /// Last solver cost, for the decrease check (18).
+    last_cost: f64,
+}
+
+impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
+    /// Default settings for this solver (constant sampling, tight rule).
+    pub fn default_settings() -> ControllerSettings {
+        ControllerSettings {
+            sampling: Sampling::Constant,
+            switching: SwitchingRule::Tight,
+            compensate_delay: true,
+            tracking_time_s: S::TRACKING_TIME_S,
+            extra_delay_s: S::EXTRA_DELAY_S,
+            position_noise_m: S::POSITION_NOISE_M,
+            disturbance_bound: 0.0,
+            max_actuation_samples: S::N,
+        }
+    }
+
+    /// A controller with every capsule at rest at `positions_m`.
+    pub fn new(settings: ControllerSettings, positions_m: &[f64]) -> Result<Self, RuntimeError> {
+        const { assert!(NX <= K2 && NX % 2 == 0) };
+        check_settings(&settings, S::N)?;
+        let mut c = Controller {
+            solver: S::new(),
+            settings,
+            filters: [CapsuleFilter::new(0.0, 0.0); NX],
+            target: [0.0; NX],
+            has_target: false,
+            applied_samples: 0,
+            last_cost: f64::INFINITY,
+        };
+        c.reset(positions_m)?;
+        Ok(c)
+    }
+
+    /// Restarts the estimate at rest at `positions_m`, keeping the target.
+    pub fn reset(&mut self, positions_m: &[f64]) -> Result<(), RuntimeError> {
+        let m = NX / 2;
+        if positions_m.len() != m {
+            return Err(RuntimeError::WrongLength("positions_m"));
+        }
+        if positions_m.iter().any(|p| !p.is_finite()) {
+            return Err(RuntimeError::NonFinite("positions_m"));
+        }
+        let std = self.settings.position_noise_m.max(1e-6);
+        for (i, &p) in positions_m.iter().enumerate() {
+            self.filters[i] = CapsuleFilter::new(p, std);
+        }
+        self.solver.reset();
+        self.applied_samples = 0;
+        self.last_cost = f64::INFINITY;
+        Ok(())
+    }
+
+    pub fn settings(&self) -> &ControllerSettings {
+        &self.settings
+    }
+
+    pub fn target(&self) -> Option<&[f64; NX]> {
+        self.has_target.then_some(&self.target)
+    }
+
+    /// The current state estimate (absolute, SI).
+    pub fn estimate(&self) -> [f64; NX] {
+        let mut x = [0.0; NX];
+        for i in 0..NX / 2 {
+            x[2 * i] = self.filters[i].mean[0];
+            x[2 * i + 1] = self.filters[i].mean[1];
+        }
+        x
+    }
+
+    /// Position standard deviations of the estimate, m (first M entries).
+    pub fn filter(&self, capsule: usize) -> Option<&CapsuleFilter> {
+        (capsule < NX / 2).then(|| &self.filters[capsule])
+    }
+
+    /// Sets a new target `[x1, v1, x2, v2, ...]` (speeds should be 0). The
+    /// plan restarts; refused when the stored plans do not cover it.
+    pub fn set_target(&mut self, target: &[f64; NX]) -> Result<(), RuntimeError> {
+        if target.iter().any(|v| !v.is_finite()) {
+            return Err(RuntimeError::NonFinite("target"));
+        }
+        let e = self.relative(&self.estimate(), target);
+        if !S::covers_from_rest(&e) {
+            return Err(RuntimeError::TargetOutOfRange);
+        }
+        self.target = *target;
+        self.has_target = true;
+        self.solver.reset();
+        self.last_cost = f64::INFINITY;
+        Ok(())
+    }
+
+    fn relative(&self, x: &[f64; NX], target: &[f64; NX]) -> [f64; NX] {
+        let mut e = [0.0; NX];
+        for j in 0..NX {
+            e[j] = x[j] - target[j];
+        }
+        e
+    }
+
+    /// Ideal sampling: the full state `x` is known now; plan one sample.
+    pub fn cycle_full_state(&mut self, x: &[f64; NX]) -> Result<CycleOutput<K>, RuntimeError> {
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(RuntimeError::NonFinite("x"));
+        }
+        for i in 0..NX / 2 {
+            self.filters[i].mean = [x[2 * i], x[2 * i + 1]];
+        }
+        Ok(self.plan_from(x, RuntimeStatus::Ok, 1))
+    }
+
+    /// One scanner cycle. `measured_positions_m` are the tracked positions
+    /// at the start of the tracking phase that just ended (None: frame lost).
+    /// Returns the gradients to play from the actuation start and how many
+    /// samples to play before the next tracking phase.
+    pub fn cycle(&mut self, measured_positions_m: Option<&[f64]>) -> Result<CycleOutput<K>, RuntimeError> {
+        let m = NX / 2;
+        let mut status = RuntimeStatus::Ok;
+        match measured_positions_m {
+            None => status = RuntimeStatus::MeasurementLost,
+            Some(z) if z.len() != m => return Err(RuntimeError::WrongLength("measured_positions_m")),
+            Some(z) => {
+                if !self.accept_measurement(z) {
+                    status = RuntimeStatus::MeasurementRejected;
+                } else {
+                    let r = sq(self.settings.position_noise_m.max(1e-6));
+                    for (i, &zi) in z.iter().enumerate() {
+                        self.filters[i].update(zi, r);
+                    }
+                }
+            }
+        }
+        // Tracking + delay pass with u = 0 before the next actuation.
+        let wait_s = self.settings.tracking_time_s + self.settings.extra_delay_s;
+        let measured = self.estimate();
+        self.predict_filters(0.0, wait_s);
+        let x_start = if self.settings.compensate_delay {
+            self.estimate()
+        } else {
+            measured
+        };
+        let n_max = match self.settings.sampling {
+            Sampling::Ideal | Sampling::Constant => 1,
+            Sampling::Variable => self.settings.max_actuation_samples,
+        };
+        let out = self.plan_from(&x_start, status, n_max);
+        // The estimator follows the actuation that will be played.
+        for k in 0..out.actuation_samples {
+            self.predict_filters(out.gradients_t_per_m[k], S::DT_S);
+        }
+        Ok(out)
+    }
+
+    fn accept_measurement(&self, z: &[f64]) -> bool {
+        let r = sq(self.settings.position_noise_m.max(1e-6));
+        z.iter().enumerate().all(|(i, &zi)| {
+            let f = &self.filters[i];
+            let innovation = zi - f.mean[0];
+            zi.is_finite()
+                && zi.abs() <= MAX_ABS_POSITION_M
+                && innovation * innovation / (f.cov[0] + r) <= MEASUREMENT_GATE_NIS
+        })
+    }
+
+    fn predict_filters(&mut self, u: f64, duration_s: f64) {
+        let gamma = self.settings.disturbance_bound;
+        // A disturbance of bound gamma, read as white noise over one sample.
+        let accel_psd = (gamma * gamma * S::DT_S).max(MIN_ACCEL_PSD);
+        let vel_psd = gamma * gamma * S::DT_S;
+        for i in 0..NX / 2 {
+            let (next, a) = S::capsule_transition(i, self.filters[i].mean, u, duration_s);
+            self.filters[i].predict(next, a, duration_s, accel_psd, vel_psd);
+        }
+    }
+
+    /// Solves from absolute state `x` and chooses the actuation length.
+    fn plan_from(&mut self, x: &[f64; NX], status: RuntimeStatus, n_max: usize) -> CycleOutput<K> {
+        let mut out = CycleOutput {
+            gradients_t_per_m: [0.0; K],
+            actuation_samples: 1,
+            status,
+            solve: None,
+            estimate: [0.0; K2],
+        };
+        out.estimate[..NX].copy_from_slice(x);
+        if !self.has_target {
+            out.status = RuntimeStatus::NoTarget;
+            return out;
+        }
+        let e = self.relative(x, &self.target);
+        self.solver.shift(self.applied_samples);
+        let report = self.solver.solve(&e);
+        out.solve = Some(report);
+        if report.status == SolveStatus::OutOfRange {
+            out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
+            out.status = RuntimeStatus::Fallback;
+            self.applied_samples = 0;
+            self.solver.reset();
+            return out;
+        }
+        if report.status == SolveStatus::IterationLimit && out.status == RuntimeStatus::Ok {
+            out.status = RuntimeStatus::IterationLimit;
+        }
+        for (o, &u) in out.gradients_t_per_m.iter_mut().zip(self.solver.plan()) {
+            // The solver keeps |u| <= u_max; clamp again as a last invariant.
+            *o = u.clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M);
+        }
+        let n = if n_max <= 1 {
+            1
+        } else {
+            self.actuation_length(&e, n_max.min(S::N))
+        };
+        out.actuation_samples = n;
+        self.applied_samples = n;
+        self.last_cost = report.cost;
+        out
+    }
+
+    /// Switching rule along the predicted plan from `e`.
+    fn actuation_length(&self, e: &[f64; NX], n_max: usize) -> usize {
+        let plan = self.solver.plan();
+        let mut costs = [0.0; K];
+        let mut grads = [0.0; K];
+        let mut growth: f64 = 1.0;
+        let mut state = *e;
+        let mut q_max: f64 = 0.0;
+        for (k, &u) in plan.iter().enumerate() {
+            costs[k] = S::stage_cost(&state, u);
+            // |grad (e'Qe)| = |2 Q e|, with Q recovered from the stage cost
+            // of unit vectors (the spec's weights, no duplication).
+            let mut g2 = 0.0;
+            for j in 0..NX {
+                let mut unit = [0.0; NX];
+                unit[j] = 1.0;
+                let qj = S::stage_cost(&unit, 0.0);
+                q_max = q_max.max(qj);
+                g2 += sq(2.0 * qj * state[j]);
+            }
+            grads[k] = libm::sqrt(g2);
+            // Local growth: infinity norm of each capsule's sampled Jacobian.
+            for i in 0..NX / 2 {
+                let (_, a) = S::capsule_transition(i, [state[2 * i], state[2 * i + 1]], u, S::DT_S);
+                let row0 = a[0].abs() + a[1].abs();
+                let row1 = a[2].abs() + a[3].abs();
+                growth = growth.max(row0.max(row1));
+            }
+            state = S::predict_plan(&state, &single(u), 1);
+        }
+        match self.settings.switching {
+            SwitchingRule::Paper => {
+                let c = PaperConstants {
+                    l_f: S::L_F,
+                    l_l: S::L_L,
+                    l_v: S::L_V,
+                    x_diameter: S::X_DIAMETER,
+                    gamma: self.settings.disturbance_bound,
+                    sigma: S::SWITCHING_SIGMA,
+                };
+                paper_actuation_samples(&c, &costs[..n_max], S::DT_S, S::N as f64 * S::DT_S)
+            }
+            SwitchingRule::Tight => {
+                let mut err2 = 0.0;
+                for i in 0..NX / 2 {
+                    err2 += 9.0 * (self.filters[i].cov[0] + self.filters[i].cov[3]);
+                }
+                let inp = TightInputs {
+                    stage_costs: &costs,
+                    cost_gradients: &grads,
+                    q_max,
+                    growth_per_sample: growth,
+                    estimate_error: libm::sqrt(err2),
+                    gamma: self.settings.disturbance_bound,
+                    dt_s: S::DT_S,
+                    sigma: S::SWITCHING_SIGMA,
+                };
+                tight_actuation_samples(&inp, n_max)
+            }
+        }
+    }
+}
+
+/// A one-sample plan (rest zero) for single-step prediction.
+fn single<const K: usize>(u: f64) -> [f64; K] {
+    let mut p = [0.0; K];
+    if K > 0 {
+        p[0] = u;
+    }
+    p
+}
+
+/// Fallback outside the tables: brake the mean speed within one sample,
+/// bounded by u_max (drag brakes further). Never extrapolates a table.
+pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(x: &[f64; NX]) -> f64 {
+    let m = NX / 2;
+    let mut mean_v = 0.0;
+    let mut mean_g = 0.0;
+    for i in 0..m {
+        mean_v += x[2 * i + 1] / m as f64;
+        // Acceleration per gradient from a one-sample prediction at rest.
+        let (next, _) = S::capsule_transition(i, [0.0, 0.0], 1.0, S::DT_S);
+        mean_g += next[1] / S::DT_S / m as f64;
+    }
+    if !(mean_g > 0.0) || !mean_v.is_finite() {
+        return 0.0;
+    }
+    (-mean_v / (mean_g * S::DT_S)).clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M)
+}
+
+fn check_settings(s: &ControllerSettings, n: usize) -> Result<(), RuntimeError> {
+    let finite_nonneg = |v: f64| v.is_finite() && v >= 0.0;
+    if !finite_nonneg(s.tracking_time_s) || s.tracking_time_s > 1.0 {
+        return Err(RuntimeError::BadSetting("tracking_time_s"));
+    }
+    if !finite_nonneg(s.extra_delay_s) || s.extra_delay_s > 1.0 {
+        return Err(RuntimeError::BadSetting("extra_delay_s"));
+    }
+    if !finite_nonneg(s.position_noise_m) || s.position_noise_m > 0.1 {
+        return Err(RuntimeError::BadSetting("position_noise_m"));
+    }
+    if !finite_nonneg(s.disturbance_bound) || s.disturbance_bound > 1e3 {
+        return Err(RuntimeError::BadSetting("disturbance_bound"));
+    }
+    if s.max_actuation_samples == 0 || s.max_actuation_samples > n {
+        return Err(RuntimeError::BadSetting("max_actuation_samples"));
+    }
+    Ok(())
+}
+
+fn sq(v: f64) -> f64 {
+    v * v
+}

@@ -1,0 +1,88 @@
+//! State estimate from position-only measurements: an extended Kalman
+//! filter on the capsule model. The capsules are coupled only through the
+//! known input, and each is measured separately, so the filter splits into
+//! one exact 2-state EKF per capsule (2x2 covariance each).
+
+/// Per-capsule filter state: mean (x, v) and covariance (row major 2x2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CapsuleFilter {
+    pub mean: [f64; 2],
+    pub cov: [f64; 4],
+}
+
+/// Default initial speed uncertainty (standard deviation), m/s: capsules
+/// start at rest, but the estimator must not be certain of it.
+pub const INITIAL_SPEED_STD_M_PER_S: f64 = 0.01;
+
+impl CapsuleFilter {
+    pub const fn new(position_m: f64, position_std_m: f64) -> CapsuleFilter {
+        CapsuleFilter {
+            mean: [position_m, 0.0],
+            cov: [
+                position_std_m * position_std_m,
+                0.0,
+                0.0,
+                INITIAL_SPEED_STD_M_PER_S * INITIAL_SPEED_STD_M_PER_S,
+            ],
+        }
+    }
+
+    /// Time update with transition `next` and Jacobian `a` over `duration_s`;
+    /// process noise: a random acceleration of spectral density `accel_psd`
+    /// ((m/s^2)^2 s) and a random velocity of density `vel_psd` ((m/s)^2 s).
+    pub fn predict(&mut self, next: [f64; 2], a: [f64; 4], duration_s: f64, accel_psd: f64, vel_psd: f64) {
+        let p = self.cov;
+        // A P A'
+        let ap = [
+            a[0] * p[0] + a[1] * p[2],
+            a[0] * p[1] + a[1] * p[3],
+            a[2] * p[0] + a[3] * p[2],
+            a[2] * p[1] + a[3] * p[3],
+        ];
+        let mut n = [
+            ap[0] * a[0] + ap[1] * a[1],
+            ap[0] * a[2] + ap[1] * a[3],
+            ap[2] * a[0] + ap[3] * a[1],
+            ap[2] * a[2] + ap[3] * a[3],
+        ];
+        // Continuous white-noise acceleration model, discretized.
+        let t = duration_s;
+        n[0] += accel_psd * t * t * t / 3.0 + vel_psd * t;
+        n[1] += accel_psd * t * t / 2.0;
+        n[2] += accel_psd * t * t / 2.0;
+        n[3] += accel_psd * t;
+        self.mean = next;
+        self.cov = n;
+    }
+
+    /// Measurement update with a position `z_m` of variance `r_m2`.
+    /// Returns the normalized innovation squared (for gating).
+    pub fn update(&mut self, z_m: f64, r_m2: f64) -> f64 {
+        let p = self.cov;
+        let s = p[0] + r_m2;
+        let innovation = z_m - self.mean[0];
+        let k = [p[0] / s, p[2] / s];
+        self.mean[0] += k[0] * innovation;
+        self.mean[1] += k[1] * innovation;
+        // Joseph-free form is fine for a scalar update of a 2x2 covariance.
+        self.cov = [
+            (1.0 - k[0]) * p[0],
+            (1.0 - k[0]) * p[1],
+            p[2] - k[1] * p[0],
+            p[3] - k[1] * p[1],
+        ];
+        // Keep it symmetric against rounding.
+        let off = 0.5 * (self.cov[1] + self.cov[2]);
+        self.cov[1] = off;
+        self.cov[2] = off;
+        innovation * innovation / s
+    }
+
+    pub fn position_std_m(&self) -> f64 {
+        libm::sqrt(self.cov[0].max(0.0))
+    }
+
+    pub fn speed_std_m_per_s(&self) -> f64 {
+        libm::sqrt(self.cov[3].max(0.0))
+    }
+}

@@ -1,0 +1,241 @@
+//! Closed-loop runs: the runtime controller against the plant simulator,
+//! on the scanner's timeline (tracking phases with u = 0, measurement delay,
+//! actuation phases chosen by the switching rule).
+
+use crate::cli::{Sampling, SimulateArgs};
+use crate::metrics::Metrics;
+use crate::plant::{DisturbanceLevel, Phase, Plant};
+use crate::report::{MeasurementRecord, RunReport};
+use anyhow::{bail, Context, Result};
+use capsule_mpc_generator::config::{Config, DisturbanceConfig};
+use capsule_mpc_generator::model::Model;
+use capsule_mpc_runtime::controller::{Sampling as RtSampling, SwitchingRule};
+use capsule_mpc_runtime::generated::PlanSolver;
+use capsule_mpc_runtime::{Controller, RuntimeStatus};
+use std::time::Instant;
+
+/// Which generated controller drives the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preset {
+    /// Offline plan tables + online refinement (the product).
+    Default,
+    /// The paper's NMPC taken literally (N = 10, Table I weights).
+    Paper,
+}
+
+/// Everything that defines one closed-loop run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    pub target: Vec<f64>,
+    pub sampling: Sampling,
+    pub switching: SwitchingRule,
+    pub compensate_delay: bool,
+    pub duration_s: f64,
+    pub disturbance: DisturbanceConfig,
+    pub seed: u64,
+    pub position_noise_m: f64,
+    /// Extra compute/transfer delay, s (the config's by default).
+    pub extra_delay_s: f64,
+    /// Drop every n-th measurement (None: keep all).
+    pub lose_every: Option<usize>,
+    pub preset: Preset,
+}
+
+impl RunOptions {
+    /// Options from the config with the given target and sampling.
+    pub fn new(config: &Config, target: Vec<f64>, sampling: Sampling) -> RunOptions {
+        RunOptions {
+            target,
+            sampling,
+            switching: SwitchingRule::Tight,
+            compensate_delay: true,
+            duration_s: 3.0,
+            disturbance: DisturbanceConfig::default(),
+            seed: 1,
+            position_noise_m: config.measurement.position_noise_m,
+            extra_delay_s: config.scanner.extra_delay_s,
+            lose_every: None,
+            preset: Preset::Default,
+        }
+    }
+}
+
+/// Runs the closed loop and returns the full report.
+pub fn run(config: &Config, opts: &RunOptions) -> Result<RunReport> {
+    use capsule_mpc_runtime::generated::{controller, paper_preset};
+    match opts.preset {
+        Preset::Default => run_with::<controller::solver::Solver, { controller::spec::NX }, { controller::spec::K }>(
+            config, opts,
+        ),
+        Preset::Paper => run_with::<
+            paper_preset::solver::Solver,
+            { paper_preset::spec::NX },
+            { paper_preset::spec::K },
+        >(config, opts),
+    }
+}
+
+fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    config: &Config,
+    opts: &RunOptions,
+) -> Result<RunReport> {
+    let model = Model::from_config(config);
+    if model.state_count() != NX {
+        bail!(
+            "the config has {} capsules but the generated solver was built for {}; run `capsule-mpc generate` and rebuild",
+            model.capsule_count(),
+            NX / 2
+        );
+    }
+    let target: [f64; NX] = opts
+        .target
+        .as_slice()
+        .try_into()
+        .with_context(|| format!("target needs {NX} entries"))?;
+    let x0 = vec![0.0; NX];
+    let mut plant = Plant::new(
+        model.clone(),
+        x0.clone(),
+        opts.disturbance.clone(),
+        if opts.sampling == Sampling::Ideal { 0.0 } else { opts.position_noise_m },
+        opts.seed,
+    )?;
+    let mut settings = Controller::<S, NX, K>::default_settings();
+    settings.sampling = match opts.sampling {
+        Sampling::Ideal => RtSampling::Ideal,
+        Sampling::Constant => RtSampling::Constant,
+        Sampling::Variable => RtSampling::Variable,
+    };
+    settings.switching = opts.switching;
+    settings.compensate_delay = opts.compensate_delay;
+    settings.extra_delay_s = opts.extra_delay_s;
+    settings.position_noise_m = opts.position_noise_m;
+    settings.disturbance_bound = opts.disturbance.bound_si();
+    let positions: Vec<f64> = x0.iter().step_by(2).copied().collect();
+    let mut ctl = Controller::<S, NX, K>::new(settings, &positions)
+        .map_err(|e| anyhow::anyhow!("controller settings: {e:?}"))?;
+    ctl.set_target(&target).map_err(|e| match e {
+        capsule_mpc_runtime::RuntimeError::TargetOutOfRange => anyhow::anyhow!(
+            "target {:?} m is outside the range the tables cover from the start state (see README, 'Coverage')",
+            opts.target
+        ),
+        other => anyhow::anyhow!("target: {other:?}"),
+    })?;
+
+    let mut measurements = Vec::new();
+    let mut max_ns: u64 = 0;
+    let mut statuses = StatusCounts::default();
+    let mut cycle = 0usize;
+    let tracking_s = settings.tracking_time_s;
+    while plant.time_s() < opts.duration_s - 1e-9 {
+        cycle += 1;
+        let out = if opts.sampling == Sampling::Ideal {
+            let x: [f64; NX] = plant.state().try_into().expect("state length");
+            measurements.push(MeasurementRecord {
+                t_s: plant.time_s(),
+                available_s: plant.time_s(),
+                positions_m: x.iter().step_by(2).copied().collect(),
+                lost: false,
+            });
+            let started = Instant::now();
+            let out = ctl.cycle_full_state(&x).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            max_ns = max_ns.max(started.elapsed().as_nanos() as u64);
+            out
+        } else {
+            let t_meas = plant.time_s();
+            let z = plant.measure_positions();
+            let lost = opts.lose_every.is_some_and(|n| n > 0 && cycle % n == 0);
+            plant.advance(tracking_s, 0.0, Phase::Track)?;
+            if opts.extra_delay_s > 0.0 {
+                plant.advance(opts.extra_delay_s, 0.0, Phase::Track)?;
+            }
+            measurements.push(MeasurementRecord {
+                t_s: t_meas,
+                available_s: plant.time_s(),
+                positions_m: z.clone(),
+                lost,
+            });
+            let started = Instant::now();
+            let out = ctl
+                .cycle(if lost { None } else { Some(&z) })
+                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            max_ns = max_ns.max(started.elapsed().as_nanos() as u64);
+            out
+        };
+        statuses.count(out.status);
+        for &u in &out.gradients_t_per_m[..out.actuation_samples] {
+            if plant.time_s() >= opts.duration_s - 1e-9 {
+                break;
+            }
+            plant.advance(S::DT_S, u, Phase::Actuate)?;
+        }
+    }
+    let (pos_bound, speed_bound) = (S::POSITION_BOUND_M, S::SPEED_BOUND_M_PER_S);
+    let records = plant.into_records();
+    let metrics = Metrics::compute(&records, &opts.target, pos_bound, speed_bound, max_ns)?;
+    let mut report = RunReport::from_records(&records, measurements, &model, opts.target.clone(), metrics);
+    report.sampling = Some(opts.sampling.name().to_string());
+    report.seed = Some(opts.seed);
+    report.fallback_cycles = Some(statuses.fallback);
+    Ok(report)
+}
+
+#[derive(Debug, Default)]
+struct StatusCounts {
+    fallback: usize,
+}
+
+impl StatusCounts {
+    fn count(&mut self, s: RuntimeStatus) {
+        if s == RuntimeStatus::Fallback {
+            self.fallback += 1;
+        }
+    }
+}
+
+/// `capsule-mpc simulate`.
+pub fn simulate_cli(args: &SimulateArgs) -> Result<()> {
+    let config = crate::cli::load_config(args.config.as_deref())?;
+    let model = Model::from_config(&config);
+    let target = args.target_state(model.state_count())?;
+    let mut opts = RunOptions::new(&config, target, args.sampling);
+    opts.duration_s = args.duration;
+    opts.seed = args.seed;
+    opts.disturbance = args.disturbance.config(&model, args.seed);
+    opts.preset = args.preset;
+    opts.switching = args.switching.into();
+    opts.compensate_delay = !args.no_delay_compensation;
+    opts.lose_every = args.lose_every;
+    if let Some(d) = args.extra_delay {
+        opts.extra_delay_s = d;
+    }
+    if args.disturbance == DisturbanceLevel::None {
+        opts.disturbance = DisturbanceConfig::default();
+    }
+    let mut report = run(&config, &opts)?;
+    report.scenario = Some(args.scenario_name().to_string());
+    report.disturbance = Some(format!("{:?}", args.disturbance).to_lowercase());
+    let m = &report.metrics;
+    println!(
+        "scenario {} ({} sampling, {:?} preset, disturbance {:?}, seed {}): settle {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} | bound violations {} | max step {:.1} us",
+        args.scenario_name(),
+        args.sampling.name(),
+        args.preset,
+        args.disturbance,
+        args.seed,
+        m.settle_time_s.map_or("never".to_string(), |t| format!("{t:.3} s")),
+        m.final_position_error_m * 1e3,
+        m.max_abs_u * 1e3,
+        m.duty_cycle,
+        m.state_bound_violations,
+        m.max_step_compute_ns as f64 / 1e3
+    );
+    if let Some(path) = &args.json {
+        report.write_json(path)?;
+    }
+    if args.plot.is_some() {
+        bail!("--plot: figures are not built yet");
+    }
+    Ok(())
+}

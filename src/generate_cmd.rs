@@ -1,0 +1,85 @@
+//! `capsule-mpc generate`: solve the tables, emit the solver crate, or check
+//! that the committed crate is what the generator produces.
+
+use crate::cli::{load_config, GenerateArgs};
+use anyhow::{bail, Context, Result};
+use capsule_mpc_generator::generate::{differences, emit_all, generate, write_atomically};
+use capsule_mpc_generator::tables::{Progress, Tables};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// An indicatif bar per generator phase (hidden when stderr is not a terminal).
+struct Bar(Mutex<Option<ProgressBar>>);
+
+impl Progress for Bar {
+    fn start(&self, phase: &str, total: usize) {
+        let bar = ProgressBar::new(total as u64);
+        bar.set_style(
+            ProgressStyle::with_template("{msg:32} [{bar:40}] {pos}/{len} ({elapsed})")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        bar.set_message(phase.to_string());
+        if let Some(old) = self.0.lock().expect("progress lock").replace(bar) {
+            old.finish();
+        }
+    }
+    fn tick(&self) {
+        if let Some(bar) = self.0.lock().expect("progress lock").as_ref() {
+            bar.inc(1);
+        }
+    }
+}
+
+impl Bar {
+    fn finish(&self) {
+        if let Some(bar) = self.0.lock().expect("progress lock").take() {
+            bar.finish();
+        }
+    }
+}
+
+pub fn run(args: &GenerateArgs) -> Result<()> {
+    let config = load_config(args.config.as_deref())?;
+    let started = Instant::now();
+    let bar = Bar(Mutex::new(None));
+    let files = if args.reuse_tables && !args.check {
+        let path = args.out.join("tables.bin");
+        let tables = Tables::read(&path, &config).context("--reuse-tables")?;
+        emit_all(&config, tables)?
+    } else {
+        generate(&config, &bar)?
+    };
+    bar.finish();
+    let elapsed = started.elapsed().as_secs_f64();
+    let t = &files.tables;
+    let table_bytes = files
+        .files
+        .iter()
+        .find(|(p, _)| p.ends_with("tables.bin"))
+        .map_or(0, |(_, b)| b.len());
+    if args.check {
+        let diff = differences(&args.out, &files);
+        if !diff.is_empty() {
+            let names: Vec<String> = diff.iter().map(|p| p.display().to_string()).collect();
+            bail!(
+                "{} differs from a fresh generation: {} (run `capsule-mpc generate`)",
+                args.out.display(),
+                names.join(", ")
+            );
+        }
+        println!("{} matches a fresh generation ({elapsed:.1} s)", args.out.display());
+        return Ok(());
+    }
+    write_atomically(&args.out, &files)?;
+    println!(
+        "generated {} in {elapsed:.1} s: {} plans ({} reach their target), {} index cells, tables.bin {} bytes",
+        args.out.display(),
+        t.plans.len(),
+        t.reached_count(),
+        t.index.len(),
+        table_bytes
+    );
+    Ok(())
+}
