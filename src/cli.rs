@@ -190,9 +190,13 @@ pub struct GenerateArgs {
 
 #[derive(Debug, Clone, Args)]
 pub struct BenchArgs {
-    /// Number of random states to solve from.
-    #[arg(long, default_value_t = 1000)]
+    /// Number of states to solve from (closed-loop states of scenarios A
+    /// and C, the rest uniform over the admissible region).
+    #[arg(long, default_value_t = 100000)]
     pub states: usize,
+    /// How many of those states (evenly spread) the peers solve too.
+    #[arg(long, default_value_t = 3000)]
+    pub peer_states: usize,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Write the timings (JSON) here.

@@ -65,9 +65,11 @@ impl RunOptions {
 pub fn run(config: &Config, opts: &RunOptions) -> Result<RunReport> {
     use capsule_mpc_runtime::generated::{controller, paper_preset};
     match opts.preset {
-        Preset::Default => run_with::<controller::solver::Solver, { controller::spec::NX }, { controller::spec::K }>(
-            config, opts,
-        ),
+        Preset::Default => {
+            run_with::<controller::solver::Solver, { controller::spec::NX }, { controller::spec::K }>(
+                config, opts,
+            )
+        }
         Preset::Paper => run_with::<
             paper_preset::solver::Solver,
             { paper_preset::spec::NX },
@@ -98,7 +100,11 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         model.clone(),
         x0.clone(),
         opts.disturbance.clone(),
-        if opts.sampling == Sampling::Ideal { 0.0 } else { opts.position_noise_m },
+        if opts.sampling == Sampling::Ideal {
+            0.0
+        } else {
+            opts.position_noise_m
+        },
         opts.seed,
     )?;
     let mut settings = Controller::<S, NX, K>::default_settings();
@@ -139,7 +145,9 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
                 lost: false,
             });
             let started = Instant::now();
-            let out = ctl.cycle_full_state(&x).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            let out = ctl
+                .cycle_full_state(&x)
+                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
             max_ns = max_ns.max(started.elapsed().as_nanos() as u64);
             out
         } else {
@@ -174,7 +182,8 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     let (pos_bound, speed_bound) = (S::POSITION_BOUND_M, S::SPEED_BOUND_M_PER_S);
     let records = plant.into_records();
     let metrics = Metrics::compute(&records, &opts.target, pos_bound, speed_bound, max_ns)?;
-    let mut report = RunReport::from_records(&records, measurements, &model, opts.target.clone(), metrics);
+    let mut report =
+        RunReport::from_records(&records, measurements, &model, opts.target.clone(), metrics);
     report.sampling = Some(opts.sampling.name().to_string());
     report.seed = Some(opts.seed);
     report.fallback_cycles = Some(statuses.fallback);
@@ -234,8 +243,10 @@ pub fn simulate_cli(args: &SimulateArgs) -> Result<()> {
     if let Some(path) = &args.json {
         report.write_json(path)?;
     }
-    if args.plot.is_some() {
-        bail!("--plot: figures are not built yet");
+    if let Some(dir) = &args.plot {
+        for path in crate::figures::plot_run(&report, dir)? {
+            println!("wrote {}", path.display());
+        }
     }
     Ok(())
 }

@@ -69,7 +69,10 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
                 names.join(", ")
             );
         }
-        println!("{} matches a fresh generation ({elapsed:.1} s)", args.out.display());
+        println!(
+            "{} matches a fresh generation ({elapsed:.1} s)",
+            args.out.display()
+        );
         return Ok(());
     }
     write_atomically(&args.out, &files)?;

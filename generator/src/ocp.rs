@@ -6,6 +6,9 @@
 //! States are relative to the target (`e = x - x_target`): the dynamics do not
 //! depend on position, so a plan solved for `e0` works for every target.
 
+// Index loops mirror the math (S[k][j], H[a][b]); iterator chains would hide it.
+#![allow(clippy::needless_range_loop)]
+
 use crate::config::Config;
 use crate::model::{rk4_capsule, Model};
 use clarabel::algebra::CscMatrix;
@@ -226,9 +229,8 @@ impl<'a> Ocp<'a> {
         let mut h = vec![vec![0.0; n]; n];
         let mut grad = vec![0.0; n];
         for k in 1..=n {
+            // Stage costs run over e_0..e_{K-1} (e_0 is fixed), terminal on e_K.
             let weights = if k == n { &w.p } else { &w.q };
-            // Terminal step also carries the stage weight of e_K? No: stage
-            // costs run over k = 0..K-1, terminal on e_K.
             let e = &states[k];
             for a in 0..k {
                 let sa = &s[k][a];

@@ -13,9 +13,13 @@
 
 // Emitted modules are formatted by prettyplease; keep rustfmt off them so
 // `generate --check` compares exactly what the generator writes.
+// Clippy style lints are off for emitted code: it favours fixed-bound
+// `while` loops (no iterator state) and literal tables over idiom.
 #[rustfmt::skip]
+#[allow(clippy::all)]
 pub mod controller;
 #[rustfmt::skip]
+#[allow(clippy::all)]
 pub mod paper_preset;
 
 /// Outcome of one solve (separate from errors: every status comes with a

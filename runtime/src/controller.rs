@@ -3,7 +3,9 @@
 
 use crate::estimator::CapsuleFilter;
 use crate::generated::{PlanSolver, SolveReport, SolveStatus};
-use crate::switching::{paper_actuation_samples, tight_actuation_samples, PaperConstants, TightInputs};
+use crate::switching::{
+    paper_actuation_samples, tight_actuation_samples, PaperConstants, TightInputs,
+};
 
 /// How the scanner interleaves tracking and actuation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -134,7 +136,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     /// A controller with every capsule at rest at `positions_m`.
     pub fn new(settings: ControllerSettings, positions_m: &[f64]) -> Result<Self, RuntimeError> {
-        const { assert!(NX <= K2 && NX % 2 == 0) };
+        const { assert!(NX <= K2 && NX.is_multiple_of(2)) };
         check_settings(&settings, S::N)?;
         let mut c = Controller {
             solver: S::new(),
@@ -231,12 +233,17 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// at the start of the tracking phase that just ended (None: frame lost).
     /// Returns the gradients to play from the actuation start and how many
     /// samples to play before the next tracking phase.
-    pub fn cycle(&mut self, measured_positions_m: Option<&[f64]>) -> Result<CycleOutput<K>, RuntimeError> {
+    pub fn cycle(
+        &mut self,
+        measured_positions_m: Option<&[f64]>,
+    ) -> Result<CycleOutput<K>, RuntimeError> {
         let m = NX / 2;
         let mut status = RuntimeStatus::Ok;
         match measured_positions_m {
             None => status = RuntimeStatus::MeasurementLost,
-            Some(z) if z.len() != m => return Err(RuntimeError::WrongLength("measured_positions_m")),
+            Some(z) if z.len() != m => {
+                return Err(RuntimeError::WrongLength("measured_positions_m"))
+            }
             Some(z) => {
                 if !self.accept_measurement(z) {
                     status = RuntimeStatus::MeasurementRejected;
@@ -408,7 +415,9 @@ fn single<const K: usize>(u: f64) -> [f64; K] {
 
 /// Fallback outside the tables: brake the mean speed within one sample,
 /// bounded by u_max (drag brakes further). Never extrapolates a table.
-pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(x: &[f64; NX]) -> f64 {
+pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    x: &[f64; NX],
+) -> f64 {
     let m = NX / 2;
     let mut mean_v = 0.0;
     let mut mean_g = 0.0;
@@ -418,7 +427,7 @@ pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(x
         let (next, _) = S::capsule_transition(i, [0.0, 0.0], 1.0, S::DT_S);
         mean_g += next[1] / S::DT_S / m as f64;
     }
-    if !(mean_g > 0.0) || !mean_v.is_finite() {
+    if mean_g.is_nan() || mean_g <= 0.0 || !mean_v.is_finite() {
         return 0.0;
     }
     (-mean_v / (mean_g * S::DT_S)).clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M)

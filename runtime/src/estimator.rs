@@ -30,7 +30,14 @@ impl CapsuleFilter {
     /// Time update with transition `next` and Jacobian `a` over `duration_s`;
     /// process noise: a random acceleration of spectral density `accel_psd`
     /// ((m/s^2)^2 s) and a random velocity of density `vel_psd` ((m/s)^2 s).
-    pub fn predict(&mut self, next: [f64; 2], a: [f64; 4], duration_s: f64, accel_psd: f64, vel_psd: f64) {
+    pub fn predict(
+        &mut self,
+        next: [f64; 2],
+        a: [f64; 4],
+        duration_s: f64,
+        accel_psd: f64,
+        vel_psd: f64,
+    ) {
         let p = self.cov;
         // A P A'
         let ap = [

@@ -36,7 +36,12 @@ impl PaperConstants {
 
 /// Largest n in 1..=n_max for which (17) holds at every sample end up to n.
 /// `stage_costs[k]` is L_k of the predicted plan (per sample).
-pub fn paper_actuation_samples(c: &PaperConstants, stage_costs: &[f64], dt_s: f64, horizon_s: f64) -> usize {
+pub fn paper_actuation_samples(
+    c: &PaperConstants,
+    stage_costs: &[f64],
+    dt_s: f64,
+    horizon_s: f64,
+) -> usize {
     let mut integral = 0.0;
     let mut n = 1;
     for (k, l) in stage_costs.iter().enumerate() {
@@ -154,7 +159,10 @@ mod tests {
         };
         assert_eq!(tight_actuation_samples(&inp, 10), 10);
         let near = [1e-6; 10];
-        let inp = TightInputs { stage_costs: &near, ..inp };
+        let inp = TightInputs {
+            stage_costs: &near,
+            ..inp
+        };
         assert_eq!(tight_actuation_samples(&inp, 10), 1);
     }
 }

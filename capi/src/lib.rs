@@ -1,0 +1,485 @@
+//! C ABI for the capsule-mpc runtime ([`capsule_mpc_runtime::DefaultController`]).
+//!
+//! The caller owns all memory: it asks for [`capsule_mpc_workspace_size`] and
+//! [`capsule_mpc_workspace_align`], provides a buffer, and
+//! [`capsule_mpc_init`] constructs the controller in it. The handle is the
+//! buffer pointer. No call allocates. Every function returns an `int32_t`
+//! error code (`CAPSULE_MPC_OK` = 0, errors < 0) except the three constant
+//! queries; on error nothing changes and no output is written.
+//!
+//! The header `include/capsule_mpc.h` is hand-written; `tests/header.rs`
+//! checks that it declares every function here with the same parameter
+//! count and the same constant values.
+//!
+//! `std` is kept for this crate (the runtime and solver below it are
+//! `no_std`): a `no_std` staticlib/cdylib needs `panic = "abort"`, which the
+//! workspace profile does not set, and the integration tests link the rlib
+//! together with `std`. No `std` API is used here, only `core`; see README.md.
+
+#![deny(unsafe_op_in_unsafe_fn)]
+
+use capsule_mpc_runtime::controller::Sampling;
+use capsule_mpc_runtime::generated::controller::solver::Solver;
+use capsule_mpc_runtime::generated::PlanSolver;
+use capsule_mpc_runtime::{DefaultController, RuntimeError, RuntimeStatus};
+use core::mem::{align_of, size_of};
+use core::ptr;
+
+/// ABI version: bumped on any change of a signature, struct or constant.
+pub const CAPSULE_MPC_ABI_VERSION: u32 = 1;
+
+pub const CAPSULE_MPC_OK: i32 = 0;
+pub const CAPSULE_MPC_ERR_NULL_POINTER: i32 = -1;
+pub const CAPSULE_MPC_ERR_BAD_SIZE: i32 = -2;
+pub const CAPSULE_MPC_ERR_BAD_ALIGN: i32 = -3;
+pub const CAPSULE_MPC_ERR_WRONG_LENGTH: i32 = -4;
+pub const CAPSULE_MPC_ERR_NON_FINITE: i32 = -5;
+pub const CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE: i32 = -6;
+pub const CAPSULE_MPC_ERR_BAD_MODE: i32 = -7;
+pub const CAPSULE_MPC_ERR_NOT_INITIALIZED: i32 = -8;
+pub const CAPSULE_MPC_ERR_BAD_SETTING: i32 = -9;
+
+pub const CAPSULE_MPC_SAMPLING_IDEAL: i32 = 0;
+pub const CAPSULE_MPC_SAMPLING_CONSTANT: i32 = 1;
+pub const CAPSULE_MPC_SAMPLING_VARIABLE: i32 = 2;
+
+pub const CAPSULE_MPC_STATUS_OK: i32 = RuntimeStatus::Ok as i32;
+pub const CAPSULE_MPC_STATUS_FALLBACK: i32 = RuntimeStatus::Fallback as i32;
+pub const CAPSULE_MPC_STATUS_ITERATION_LIMIT: i32 = RuntimeStatus::IterationLimit as i32;
+pub const CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED: i32 = RuntimeStatus::MeasurementRejected as i32;
+pub const CAPSULE_MPC_STATUS_MEASUREMENT_LOST: i32 = RuntimeStatus::MeasurementLost as i32;
+pub const CAPSULE_MPC_STATUS_NO_TARGET: i32 = RuntimeStatus::NoTarget as i32;
+
+const M: usize = <Solver as PlanSolver<NX, K>>::M;
+const NX: usize = capsule_mpc_runtime::generated::controller::spec::NX;
+const K: usize = capsule_mpc_runtime::generated::controller::spec::K;
+const N: usize = <Solver as PlanSolver<NX, K>>::N;
+
+/// "CAPSMPC1": written last by a successful init, checked by every call.
+const MAGIC: u64 = 0x4341_5053_4d50_4331;
+
+/// What the host fed since the last actuation request.
+#[derive(Debug, Clone, Copy)]
+enum Pending {
+    /// Nothing fed (treated as a lost frame).
+    Nothing,
+    /// The tracking frame was lost.
+    Lost,
+    /// Positions measured at the start of the tracking phase, m.
+    Positions([f64; M]),
+    /// Full state (ideal sampling), SI.
+    FullState([f64; NX]),
+}
+
+/// The workspace behind a `capsule_mpc_t*` handle (opaque to C).
+#[repr(C)]
+pub struct CapsuleMpc {
+    /// First field, so a zeroed or foreign buffer is detected.
+    magic: u64,
+    pending: Pending,
+    last_status: RuntimeStatus,
+    /// Time stamp of the last fed frame, s (bookkeeping; must be finite).
+    last_measured_t_s: f64,
+    controller: DefaultController,
+}
+
+type Res = Result<(), i32>;
+
+fn code(r: Res) -> i32 {
+    match r {
+        Ok(()) => CAPSULE_MPC_OK,
+        Err(e) => e,
+    }
+}
+
+fn map_err(e: RuntimeError) -> i32 {
+    match e {
+        RuntimeError::NonFinite(_) => CAPSULE_MPC_ERR_NON_FINITE,
+        RuntimeError::WrongLength(_) => CAPSULE_MPC_ERR_WRONG_LENGTH,
+        RuntimeError::TargetOutOfRange => CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE,
+        RuntimeError::BadSetting(_) => CAPSULE_MPC_ERR_BAD_SETTING,
+    }
+}
+
+/// Null and alignment check of a pointer the caller passes.
+fn check_ptr<T>(p: *const T) -> Res {
+    if p.is_null() {
+        Err(CAPSULE_MPC_ERR_NULL_POINTER)
+    } else if !p.is_aligned() {
+        Err(CAPSULE_MPC_ERR_BAD_ALIGN)
+    } else {
+        Ok(())
+    }
+}
+
+/// Reads `n == expected` doubles from `p` (checked) into an array.
+///
+/// # Safety
+/// If `p` is non-null and aligned it must point to `n` readable doubles.
+unsafe fn read_array<const L: usize>(p: *const f64, n: usize) -> Result<[f64; L], i32> {
+    check_ptr(p)?;
+    if n != L {
+        return Err(CAPSULE_MPC_ERR_WRONG_LENGTH);
+    }
+    let mut a = [0.0; L];
+    // SAFETY: p is non-null, aligned, and the caller guarantees n = L doubles.
+    a.copy_from_slice(unsafe { core::slice::from_raw_parts(p, L) });
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(CAPSULE_MPC_ERR_NON_FINITE);
+    }
+    Ok(a)
+}
+
+/// Borrows the workspace behind a handle after null, alignment and magic
+/// checks.
+///
+/// # Safety
+/// A non-null aligned `h` must point to at least `capsule_mpc_workspace_size()`
+/// initialized bytes (a zeroed buffer is detected as uninitialized), not
+/// accessed concurrently.
+unsafe fn workspace<'a>(h: *mut CapsuleMpc) -> Result<&'a mut CapsuleMpc, i32> {
+    check_ptr(h)?;
+    // SAFETY: h is non-null and aligned; the magic word is a plain u64, valid
+    // for any initialized bit pattern.
+    let magic = unsafe { ptr::addr_of!((*h).magic).read() };
+    if magic != MAGIC {
+        return Err(CAPSULE_MPC_ERR_NOT_INITIALIZED);
+    }
+    // SAFETY: the magic is only written by capsule_mpc_init after the whole
+    // struct was written, so the struct is valid.
+    Ok(unsafe { &mut *h })
+}
+
+/// Writes `v` through an output pointer (checked).
+///
+/// # Safety
+/// A non-null aligned `p` must be valid for a write of `T`.
+unsafe fn write_out<T>(p: *mut T, v: T) {
+    // SAFETY: checked by the caller with check_ptr; valid per the contract.
+    unsafe { p.write(v) }
+}
+
+/// ABI version of this library (`CAPSULE_MPC_ABI_VERSION`).
+#[no_mangle]
+pub extern "C" fn capsule_mpc_abi_version() -> u32 {
+    CAPSULE_MPC_ABI_VERSION
+}
+
+/// Bytes the caller must provide to `capsule_mpc_init`.
+#[no_mangle]
+pub extern "C" fn capsule_mpc_workspace_size() -> usize {
+    size_of::<CapsuleMpc>()
+}
+
+/// Alignment the buffer given to `capsule_mpc_init` must have.
+#[no_mangle]
+pub extern "C" fn capsule_mpc_workspace_align() -> usize {
+    align_of::<CapsuleMpc>()
+}
+
+/// The build's dimensions, so a host checks it links what it expects.
+///
+/// # Safety
+/// Every pointer must be valid for one write of its type.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_dimensions(
+    capsules: *mut u32,
+    horizon: *mut u32,
+    plan_len: *mut u32,
+    sample_time_s: *mut f64,
+    u_max_t_per_m: *mut f64,
+) -> i32 {
+    let r = (|| {
+        check_ptr(capsules)?;
+        check_ptr(horizon)?;
+        check_ptr(plan_len)?;
+        check_ptr(sample_time_s)?;
+        check_ptr(u_max_t_per_m)?;
+        // SAFETY: every pointer checked above; valid per the contract.
+        unsafe {
+            write_out(capsules, M as u32);
+            write_out(horizon, N as u32);
+            write_out(plan_len, K as u32);
+            write_out(sample_time_s, <Solver as PlanSolver<NX, K>>::DT_S);
+            write_out(u_max_t_per_m, <Solver as PlanSolver<NX, K>>::U_MAX_T_PER_M);
+        }
+        Ok(())
+    })();
+    code(r)
+}
+
+/// Constructs a controller in `buffer` (`size` bytes, aligned to
+/// `capsule_mpc_workspace_align()`), every capsule at rest at `positions_m`
+/// (`n_positions` = capsule count), constant sampling, no target. The handle
+/// is `buffer`.
+///
+/// # Safety
+/// `buffer` must be valid for writes of `size` bytes; `positions_m` must
+/// point to `n_positions` doubles.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_init(
+    buffer: *mut core::ffi::c_void,
+    size: usize,
+    positions_m: *const f64,
+    n_positions: usize,
+) -> i32 {
+    let r = (|| {
+        let h = buffer.cast::<CapsuleMpc>();
+        if h.is_null() {
+            return Err(CAPSULE_MPC_ERR_NULL_POINTER);
+        }
+        if size < size_of::<CapsuleMpc>() {
+            return Err(CAPSULE_MPC_ERR_BAD_SIZE);
+        }
+        if !h.is_aligned() {
+            return Err(CAPSULE_MPC_ERR_BAD_ALIGN);
+        }
+        // SAFETY: read_array checks null, alignment and length.
+        let p: [f64; M] = unsafe { read_array(positions_m, n_positions) }?;
+        let controller =
+            DefaultController::new(DefaultController::default_settings(), &p).map_err(map_err)?;
+        let ws = CapsuleMpc {
+            magic: MAGIC,
+            pending: Pending::Nothing,
+            last_status: RuntimeStatus::NoTarget,
+            last_measured_t_s: 0.0,
+            controller,
+        };
+        // SAFETY: h is non-null, aligned, and the buffer holds size >=
+        // size_of::<CapsuleMpc>() writable bytes. ptr::write does not read
+        // or drop the old contents.
+        unsafe { ptr::write(h, ws) };
+        Ok(())
+    })();
+    code(r)
+}
+
+/// Restarts the estimate at rest at `positions_m`, keeping the target and
+/// the sampling mode; drops any fed frame.
+///
+/// # Safety
+/// `handle` must come from `capsule_mpc_init` (or be a zeroed buffer);
+/// `positions_m` must point to `n` doubles.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_reset(
+    handle: *mut CapsuleMpc,
+    positions_m: *const f64,
+    n: usize,
+) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; the helpers check pointers.
+        let ws = unsafe { workspace(handle) }?;
+        let p: [f64; M] = unsafe { read_array(positions_m, n) }?;
+        ws.controller.reset(&p).map_err(map_err)?;
+        ws.pending = Pending::Nothing;
+        Ok(())
+    })();
+    code(r)
+}
+
+/// Sets the target state `[x1, v1, x2, v2, ...]` (`n` = 2 x capsules; SI,
+/// speeds 0). Refused with TARGET_OUT_OF_RANGE when the stored plans do not
+/// cover it from the current estimate.
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`; `target` must point to `n` doubles.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_set_target(
+    handle: *mut CapsuleMpc,
+    target: *const f64,
+    n: usize,
+) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; the helpers check pointers.
+        let ws = unsafe { workspace(handle) }?;
+        let t: [f64; NX] = unsafe { read_array(target, n) }?;
+        ws.controller.set_target(&t).map_err(map_err)
+    })();
+    code(r)
+}
+
+/// Sampling mode: 0 ideal (feed the full state with
+/// `capsule_mpc_feed_state`), 1 constant (one actuation sample per tracking
+/// phase, the default), 2 variable (the switching rule decides). Changing
+/// the mode restarts the estimate at rest at the current estimated positions
+/// (keeping the target): call it before the loop.
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_set_sampling(handle: *mut CapsuleMpc, mode: i32) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; workspace checks the handle.
+        let ws = unsafe { workspace(handle) }?;
+        let sampling = match mode {
+            CAPSULE_MPC_SAMPLING_IDEAL => Sampling::Ideal,
+            CAPSULE_MPC_SAMPLING_CONSTANT => Sampling::Constant,
+            CAPSULE_MPC_SAMPLING_VARIABLE => Sampling::Variable,
+            _ => return Err(CAPSULE_MPC_ERR_BAD_MODE),
+        };
+        if ws.controller.settings().sampling == sampling {
+            return Ok(());
+        }
+        // The runtime fixes settings at construction: rebuild, then commit.
+        let mut settings = *ws.controller.settings();
+        settings.sampling = sampling;
+        let x = ws.controller.estimate();
+        let mut positions = [0.0; M];
+        for (i, p) in positions.iter_mut().enumerate() {
+            *p = x[2 * i];
+        }
+        let mut c = DefaultController::new(settings, &positions).map_err(map_err)?;
+        if let Some(t) = ws.controller.target() {
+            c.set_target(t).map_err(map_err)?;
+        }
+        ws.controller = c;
+        ws.pending = Pending::Nothing;
+        Ok(())
+    })();
+    code(r)
+}
+
+/// Feeds one tracking frame: `positions_m` (`n` = capsules) measured at the
+/// start of the tracking phase that just ended, at scanner time
+/// `t_measured_s`. With `lost != 0` the frame is lost: `positions_m` may be
+/// NULL and `n` is ignored. A later feed replaces an earlier one.
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`; `positions_m` must point to `n`
+/// doubles unless `lost != 0`.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_feed_tracking(
+    handle: *mut CapsuleMpc,
+    positions_m: *const f64,
+    n: usize,
+    t_measured_s: f64,
+    lost: i32,
+) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; the helpers check pointers.
+        let ws = unsafe { workspace(handle) }?;
+        if !t_measured_s.is_finite() {
+            return Err(CAPSULE_MPC_ERR_NON_FINITE);
+        }
+        let pending = if lost != 0 {
+            Pending::Lost
+        } else {
+            Pending::Positions(unsafe { read_array(positions_m, n) }?)
+        };
+        ws.pending = pending;
+        ws.last_measured_t_s = t_measured_s;
+        Ok(())
+    })();
+    code(r)
+}
+
+/// Feeds the full state `[x1, v1, x2, v2, ...]` (`n` = 2 x capsules), for
+/// ideal sampling: the next actuation is planned from it directly.
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`; `state` must point to `n` doubles.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_feed_state(
+    handle: *mut CapsuleMpc,
+    state: *const f64,
+    n: usize,
+) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; the helpers check pointers.
+        let ws = unsafe { workspace(handle) }?;
+        ws.pending = Pending::FullState(unsafe { read_array(state, n) }?);
+        Ok(())
+    })();
+    code(r)
+}
+
+/// Runs one controller cycle on the fed frame (nothing fed counts as a lost
+/// frame) and writes the plan: `gradients_t_per_m[0..min(capacity, plan_len)]`
+/// in T/m, of which the first `*samples` are to be played (20 ms each) from
+/// the actuation start; `*status` is a `CAPSULE_MPC_STATUS_*` value.
+/// `capacity` must be at least the horizon (the largest `*samples`).
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`; `gradients_t_per_m` must be valid
+/// for `capacity` writes; `samples` and `status` for one write each.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_next_actuation(
+    handle: *mut CapsuleMpc,
+    gradients_t_per_m: *mut f64,
+    capacity: usize,
+    samples: *mut u32,
+    status: *mut i32,
+) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; the helpers check pointers.
+        let ws = unsafe { workspace(handle) }?;
+        check_ptr(gradients_t_per_m)?;
+        check_ptr(samples)?;
+        check_ptr(status)?;
+        if capacity < N {
+            return Err(CAPSULE_MPC_ERR_WRONG_LENGTH);
+        }
+        let out = match ws.pending {
+            Pending::Nothing | Pending::Lost => ws.controller.cycle(None),
+            Pending::Positions(z) => ws.controller.cycle(Some(&z)),
+            Pending::FullState(x) => ws.controller.cycle_full_state(&x),
+        }
+        .map_err(map_err)?;
+        ws.pending = Pending::Nothing;
+        ws.last_status = out.status;
+        let len = capacity.min(K);
+        // SAFETY: the pointers were checked above; the caller guarantees
+        // `capacity` doubles at gradients_t_per_m and len <= capacity.
+        unsafe {
+            core::slice::from_raw_parts_mut(gradients_t_per_m, len)
+                .copy_from_slice(&out.gradients_t_per_m[..len]);
+            write_out(samples, out.actuation_samples as u32);
+            write_out(status, out.status as i32);
+        }
+        Ok(())
+    })();
+    code(r)
+}
+
+/// Status of the last cycle (`CAPSULE_MPC_STATUS_NO_TARGET` before any).
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`; `status` valid for one write.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_last_status(handle: *mut CapsuleMpc, status: *mut i32) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; the helpers check pointers.
+        let ws = unsafe { workspace(handle) }?;
+        check_ptr(status)?;
+        // SAFETY: checked above.
+        unsafe { write_out(status, ws.last_status as i32) };
+        Ok(())
+    })();
+    code(r)
+}
+
+/// Current state estimate `[x1, v1, x2, v2, ...]` (SI) into `state`
+/// (`capacity` >= 2 x capsules).
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`; `state` valid for `capacity` writes.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_estimate(
+    handle: *mut CapsuleMpc,
+    state: *mut f64,
+    capacity: usize,
+) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; the helpers check pointers.
+        let ws = unsafe { workspace(handle) }?;
+        check_ptr(state)?;
+        if capacity < NX {
+            return Err(CAPSULE_MPC_ERR_WRONG_LENGTH);
+        }
+        let x = ws.controller.estimate();
+        // SAFETY: checked above; capacity >= NX doubles per the contract.
+        unsafe { core::slice::from_raw_parts_mut(state, NX).copy_from_slice(&x) };
+        Ok(())
+    })();
+    code(r)
+}

@@ -1,0 +1,656 @@
+//! Every exported function with bad arguments (error codes, nothing
+//! changes), and one good-path closed loop through the C functions.
+
+use capsule_mpc_capi::*;
+use core::ffi::c_void;
+use core::ptr::{null, null_mut};
+
+#[repr(C, align(64))]
+struct Buf([u8; 1 << 16]);
+
+fn zeroed_buf() -> Box<Buf> {
+    Box::new(Buf([0; 1 << 16]))
+}
+
+fn handle(b: &mut Buf) -> *mut CapsuleMpc {
+    b.0.as_mut_ptr().cast()
+}
+
+/// A pointer to a double that is not 8-byte aligned (inside `bytes`).
+fn misaligned_f64(bytes: &mut [u64; 8]) -> *mut f64 {
+    unsafe { bytes.as_mut_ptr().cast::<u8>().add(1).cast() }
+}
+
+const ORIGIN: [f64; 2] = [0.0, 0.0];
+const TARGET_C: [f64; 4] = [0.02, 0.0, -0.01, 0.0];
+
+fn initialized() -> Box<Buf> {
+    let mut b = zeroed_buf();
+    let size = b.0.len();
+    let rc = unsafe { capsule_mpc_init(b.0.as_mut_ptr().cast(), size, ORIGIN.as_ptr(), 2) };
+    assert_eq!(rc, CAPSULE_MPC_OK);
+    b
+}
+
+fn horizon() -> usize {
+    let (mut m, mut n, mut k, mut dt, mut u) = (0u32, 0u32, 0u32, 0.0, 0.0);
+    assert_eq!(
+        unsafe { capsule_mpc_dimensions(&mut m, &mut n, &mut k, &mut dt, &mut u) },
+        CAPSULE_MPC_OK
+    );
+    n as usize
+}
+
+#[test]
+fn constant_queries() {
+    assert_eq!(capsule_mpc_abi_version(), CAPSULE_MPC_ABI_VERSION);
+    let size = capsule_mpc_workspace_size();
+    let align = capsule_mpc_workspace_align();
+    assert!(size > 0 && size <= 1 << 16, "{size}");
+    assert!(align.is_power_of_two() && align <= 64);
+    let (mut m, mut n, mut k, mut dt, mut u) = (0u32, 0u32, 0u32, 0.0, 0.0);
+    assert_eq!(
+        unsafe { capsule_mpc_dimensions(&mut m, &mut n, &mut k, &mut dt, &mut u) },
+        CAPSULE_MPC_OK
+    );
+    assert_eq!(m, 2);
+    assert!(n >= 1 && k >= n);
+    assert_eq!(dt, 0.02);
+    assert_eq!(u, 0.04);
+}
+
+#[test]
+fn dimensions_bad_pointers() {
+    let (mut m, mut n, mut k, mut dt, mut u) = (7u32, 7u32, 7u32, 7.0, 7.0);
+    unsafe {
+        assert_eq!(
+            capsule_mpc_dimensions(null_mut(), &mut n, &mut k, &mut dt, &mut u),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_dimensions(&mut m, null_mut(), &mut k, &mut dt, &mut u),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_dimensions(&mut m, &mut n, null_mut(), &mut dt, &mut u),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_dimensions(&mut m, &mut n, &mut k, null_mut(), &mut u),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_dimensions(&mut m, &mut n, &mut k, &mut dt, null_mut()),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        let mut words = [0u64; 8];
+        let bad_u32 = words.as_mut_ptr().cast::<u8>().add(1).cast::<u32>();
+        assert_eq!(
+            capsule_mpc_dimensions(bad_u32, &mut n, &mut k, &mut dt, &mut u),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        let bad_f64 = misaligned_f64(&mut words);
+        assert_eq!(
+            capsule_mpc_dimensions(&mut m, &mut n, &mut k, bad_f64, &mut u),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+    }
+    // Nothing was written.
+    assert_eq!((m, n, k, dt, u), (7, 7, 7, 7.0, 7.0));
+}
+
+#[test]
+fn init_bad_args() {
+    let mut b = zeroed_buf();
+    let size = b.0.len();
+    let need = capsule_mpc_workspace_size();
+    let buf: *mut c_void = b.0.as_mut_ptr().cast();
+    let mut words = [0u64; 8];
+    let nan = [f64::NAN, 0.0];
+    let inf = [0.0, f64::INFINITY];
+    unsafe {
+        assert_eq!(
+            capsule_mpc_init(null_mut(), size, ORIGIN.as_ptr(), 2),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_init(buf, 0, ORIGIN.as_ptr(), 2),
+            CAPSULE_MPC_ERR_BAD_SIZE
+        );
+        assert_eq!(
+            capsule_mpc_init(buf, need - 1, ORIGIN.as_ptr(), 2),
+            CAPSULE_MPC_ERR_BAD_SIZE
+        );
+        let misaligned: *mut c_void = b.0.as_mut_ptr().add(1).cast();
+        assert_eq!(
+            capsule_mpc_init(misaligned, size - 1, ORIGIN.as_ptr(), 2),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        assert_eq!(
+            capsule_mpc_init(buf, size, null(), 2),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_init(buf, size, misaligned_f64(&mut words), 2),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        assert_eq!(
+            capsule_mpc_init(buf, size, ORIGIN.as_ptr(), 1),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_init(buf, size, ORIGIN.as_ptr(), 3),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_init(buf, size, ORIGIN.as_ptr(), 0),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_init(buf, size, nan.as_ptr(), 2),
+            CAPSULE_MPC_ERR_NON_FINITE
+        );
+        assert_eq!(
+            capsule_mpc_init(buf, size, inf.as_ptr(), 2),
+            CAPSULE_MPC_ERR_NON_FINITE
+        );
+    }
+    // No failed init wrote anything: the buffer is still all zero.
+    assert!(b.0.iter().all(|&x| x == 0));
+    let mut status = 0;
+    assert_eq!(
+        unsafe { capsule_mpc_last_status(handle(&mut b), &mut status) },
+        CAPSULE_MPC_ERR_NOT_INITIALIZED
+    );
+    // Exactly the advertised size is enough.
+    assert_eq!(
+        unsafe { capsule_mpc_init(buf, need, ORIGIN.as_ptr(), 2) },
+        CAPSULE_MPC_OK
+    );
+}
+
+/// Calls every handle function on `h` and checks each returns `expected`.
+fn every_handle_fn_returns(h: *mut CapsuleMpc, expected: i32) {
+    let mut grads = [0.0; 256];
+    let (mut samples, mut status) = (0u32, 0i32);
+    let mut x = [0.0; 4];
+    unsafe {
+        assert_eq!(capsule_mpc_reset(h, ORIGIN.as_ptr(), 2), expected, "reset");
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+            expected,
+            "set_target"
+        );
+        assert_eq!(
+            capsule_mpc_set_sampling(h, CAPSULE_MPC_SAMPLING_VARIABLE),
+            expected,
+            "set_sampling"
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
+            expected,
+            "feed_tracking"
+        );
+        assert_eq!(
+            capsule_mpc_feed_state(h, TARGET_C.as_ptr(), 4),
+            expected,
+            "feed_state"
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(
+                h,
+                grads.as_mut_ptr(),
+                grads.len(),
+                &mut samples,
+                &mut status
+            ),
+            expected,
+            "next_actuation"
+        );
+        assert_eq!(
+            capsule_mpc_last_status(h, &mut status),
+            expected,
+            "last_status"
+        );
+        assert_eq!(
+            capsule_mpc_estimate(h, x.as_mut_ptr(), 4),
+            expected,
+            "estimate"
+        );
+    }
+}
+
+#[test]
+fn uninitialized_null_and_misaligned_handles() {
+    let mut b = zeroed_buf();
+    every_handle_fn_returns(handle(&mut b), CAPSULE_MPC_ERR_NOT_INITIALIZED);
+    every_handle_fn_returns(null_mut(), CAPSULE_MPC_ERR_NULL_POINTER);
+    let misaligned = unsafe { b.0.as_mut_ptr().add(4).cast::<CapsuleMpc>() };
+    every_handle_fn_returns(misaligned, CAPSULE_MPC_ERR_BAD_ALIGN);
+    // Garbage (not zero) is detected too.
+    b.0.fill(0xa5);
+    every_handle_fn_returns(handle(&mut b), CAPSULE_MPC_ERR_NOT_INITIALIZED);
+    // Nothing wrote to the buffer.
+    assert!(b.0.iter().all(|&x| x == 0xa5));
+}
+
+fn estimate(h: *mut CapsuleMpc) -> [f64; 4] {
+    let mut x = [f64::NAN; 4];
+    assert_eq!(
+        unsafe { capsule_mpc_estimate(h, x.as_mut_ptr(), 4) },
+        CAPSULE_MPC_OK
+    );
+    x
+}
+
+#[test]
+fn reset_bad_args() {
+    let mut b = initialized();
+    let h = handle(&mut b);
+    let mut words = [0u64; 8];
+    let before = estimate(h);
+    unsafe {
+        assert_eq!(
+            capsule_mpc_reset(h, null(), 2),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_reset(h, misaligned_f64(&mut words), 2),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        assert_eq!(
+            capsule_mpc_reset(h, [0.01].as_ptr(), 1),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_reset(h, [0.01, 0.0, 0.0].as_ptr(), 3),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_reset(h, [0.01, f64::NAN].as_ptr(), 2),
+            CAPSULE_MPC_ERR_NON_FINITE
+        );
+    }
+    assert_eq!(estimate(h), before);
+    assert_eq!(
+        unsafe { capsule_mpc_reset(h, [0.01, -0.01].as_ptr(), 2) },
+        CAPSULE_MPC_OK
+    );
+    assert_eq!(estimate(h), [0.01, 0.0, -0.01, 0.0]);
+}
+
+#[test]
+fn set_target_bad_args() {
+    let mut b = initialized();
+    let h = handle(&mut b);
+    let mut words = [0u64; 8];
+    unsafe {
+        assert_eq!(
+            capsule_mpc_set_target(h, null(), 4),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_set_target(h, misaligned_f64(&mut words), 4),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 2),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 3),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_set_target(h, [0.02, f64::NAN, 0.0, 0.0].as_ptr(), 4),
+            CAPSULE_MPC_ERR_NON_FINITE
+        );
+        assert_eq!(
+            capsule_mpc_set_target(h, [0.02, 0.0, f64::NEG_INFINITY, 0.0].as_ptr(), 4),
+            CAPSULE_MPC_ERR_NON_FINITE
+        );
+        assert_eq!(
+            capsule_mpc_set_target(h, [0.5, 0.0, 0.0, 0.0].as_ptr(), 4),
+            CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE
+        );
+        assert_eq!(
+            capsule_mpc_set_target(h, [0.0, 0.0, -0.5, 0.0].as_ptr(), 4),
+            CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE
+        );
+    }
+    // No target was set: a cycle reports NO_TARGET and a zero gradient.
+    let mut grads = [1.0; 64];
+    let (mut samples, mut status) = (0u32, -1i32);
+    assert_eq!(
+        unsafe {
+            capsule_mpc_next_actuation(
+                h,
+                grads.as_mut_ptr(),
+                grads.len(),
+                &mut samples,
+                &mut status,
+            )
+        },
+        CAPSULE_MPC_OK
+    );
+    assert_eq!(status, CAPSULE_MPC_STATUS_NO_TARGET);
+    assert_eq!(grads[0], 0.0);
+    assert_eq!(
+        unsafe { capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4) },
+        CAPSULE_MPC_OK
+    );
+}
+
+#[test]
+fn set_sampling_bad_mode() {
+    let mut b = initialized();
+    let h = handle(&mut b);
+    unsafe {
+        for mode in [-1, 3, 100, i32::MIN, i32::MAX] {
+            assert_eq!(
+                capsule_mpc_set_sampling(h, mode),
+                CAPSULE_MPC_ERR_BAD_MODE,
+                "mode {mode}"
+            );
+        }
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
+        for mode in [
+            CAPSULE_MPC_SAMPLING_IDEAL,
+            CAPSULE_MPC_SAMPLING_VARIABLE,
+            CAPSULE_MPC_SAMPLING_CONSTANT,
+        ] {
+            assert_eq!(
+                capsule_mpc_set_sampling(h, mode),
+                CAPSULE_MPC_OK,
+                "mode {mode}"
+            );
+        }
+    }
+}
+
+#[test]
+fn feed_bad_args() {
+    let mut b = initialized();
+    let h = handle(&mut b);
+    let mut words = [0u64; 8];
+    unsafe {
+        // Tracking frames.
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, null(), 2, 0.0, 0),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, misaligned_f64(&mut words), 2, 0.0, 0),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 1, 0.0, 0),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 4, 0.0, 0),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, [f64::NAN, 0.0].as_ptr(), 2, 0.0, 0),
+            CAPSULE_MPC_ERR_NON_FINITE
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, f64::NAN, 0),
+            CAPSULE_MPC_ERR_NON_FINITE
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, f64::INFINITY, 1),
+            CAPSULE_MPC_ERR_NON_FINITE
+        );
+        // A lost frame needs no positions.
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, null(), 0, 0.0, 1),
+            CAPSULE_MPC_OK
+        );
+        // Full state.
+        assert_eq!(
+            capsule_mpc_feed_state(h, null(), 4),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_feed_state(h, misaligned_f64(&mut words), 4),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        assert_eq!(
+            capsule_mpc_feed_state(h, TARGET_C.as_ptr(), 2),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_feed_state(h, TARGET_C.as_ptr(), 5),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_feed_state(h, [0.0, f64::NAN, 0.0, 0.0].as_ptr(), 4),
+            CAPSULE_MPC_ERR_NON_FINITE
+        );
+    }
+    // The lost frame is still the pending one: the cycle reports it.
+    let mut grads = [0.0; 64];
+    let (mut samples, mut status) = (0u32, -1i32);
+    assert_eq!(
+        unsafe { capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4) },
+        CAPSULE_MPC_OK
+    );
+    assert_eq!(
+        unsafe { capsule_mpc_feed_tracking(h, null(), 0, 0.0, 1) },
+        CAPSULE_MPC_OK
+    );
+    assert_eq!(
+        unsafe {
+            capsule_mpc_next_actuation(
+                h,
+                grads.as_mut_ptr(),
+                grads.len(),
+                &mut samples,
+                &mut status,
+            )
+        },
+        CAPSULE_MPC_OK
+    );
+    assert_eq!(status, CAPSULE_MPC_STATUS_MEASUREMENT_LOST);
+}
+
+#[test]
+fn next_actuation_last_status_estimate_bad_args() {
+    let mut b = initialized();
+    let h = handle(&mut b);
+    let n = horizon();
+    let mut grads = [7.0; 256];
+    let (mut samples, mut status) = (7u32, 7i32);
+    let mut words = [0u64; 64];
+    unsafe {
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
+            CAPSULE_MPC_OK
+        );
+        let before = estimate(h);
+        let g = grads.as_mut_ptr();
+        assert_eq!(
+            capsule_mpc_next_actuation(h, null_mut(), 64, &mut samples, &mut status),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(h, g, 64, null_mut(), &mut status),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(h, g, 64, &mut samples, null_mut()),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(
+                h,
+                misaligned_f64(&mut [0u64; 8]),
+                4,
+                &mut samples,
+                &mut status
+            ),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        let bad_u32 = words.as_mut_ptr().cast::<u8>().add(1).cast::<u32>();
+        assert_eq!(
+            capsule_mpc_next_actuation(h, g, 64, bad_u32, &mut status),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        let bad_i32 = words.as_mut_ptr().cast::<u8>().add(2).cast::<i32>();
+        assert_eq!(
+            capsule_mpc_next_actuation(h, g, 64, &mut samples, bad_i32),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(h, g, 0, &mut samples, &mut status),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(h, g, n - 1, &mut samples, &mut status),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+        // Nothing ran and nothing was written.
+        assert_eq!(estimate(h), before);
+        assert!(grads.iter().all(|&v| v == 7.0));
+        assert_eq!((samples, status), (7, 7));
+        assert_eq!(capsule_mpc_last_status(h, &mut status), CAPSULE_MPC_OK);
+        assert_eq!(status, CAPSULE_MPC_STATUS_NO_TARGET);
+
+        assert_eq!(
+            capsule_mpc_last_status(h, null_mut()),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_last_status(h, bad_i32),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        let mut x = [0.0; 8];
+        assert_eq!(
+            capsule_mpc_estimate(h, null_mut(), 4),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            capsule_mpc_estimate(h, misaligned_f64(&mut [0u64; 8]), 4),
+            CAPSULE_MPC_ERR_BAD_ALIGN
+        );
+        assert_eq!(
+            capsule_mpc_estimate(h, x.as_mut_ptr(), 3),
+            CAPSULE_MPC_ERR_WRONG_LENGTH
+        );
+
+        // Capacity = horizon is enough; the pending frame is consumed.
+        assert_eq!(
+            capsule_mpc_next_actuation(h, g, n, &mut samples, &mut status),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(status, CAPSULE_MPC_STATUS_OK);
+        assert!(samples >= 1 && samples as usize <= n);
+        assert!(grads[n..].iter().all(|&v| v == 7.0), "wrote past capacity");
+        let mut last = -1;
+        assert_eq!(capsule_mpc_last_status(h, &mut last), CAPSULE_MPC_OK);
+        assert_eq!(last, status);
+    }
+}
+
+// ---- good path ----
+
+const G: [f64; 2] = [173.25, 173.25];
+const B: [f64; 2] = [134.7, 16.84];
+
+fn deriv(s: &[f64; 4], u: f64) -> [f64; 4] {
+    let mut d = [0.0; 4];
+    for i in 0..2 {
+        let v = s[2 * i + 1];
+        d[2 * i] = v;
+        d[2 * i + 1] = -B[i] * v * v.abs() + G[i] * u;
+    }
+    d
+}
+
+fn rk4(s: &mut [f64; 4], u: f64, h: f64) {
+    let add =
+        |a: &[f64; 4], k: &[f64; 4], c: f64| std::array::from_fn::<f64, 4, _>(|j| a[j] + c * k[j]);
+    let k1 = deriv(s, u);
+    let k2 = deriv(&add(s, &k1, h / 2.0), u);
+    let k3 = deriv(&add(s, &k2, h / 2.0), u);
+    let k4 = deriv(&add(s, &k3, h), u);
+    for j in 0..4 {
+        s[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+    }
+}
+
+/// Holds `u` for 20 ms at 1 ms RK4 steps.
+fn hold(s: &mut [f64; 4], u: f64) {
+    for _ in 0..20 {
+        rk4(s, u, 1e-3);
+    }
+}
+
+/// Scenario C through the C functions; returns the final plant state.
+fn closed_loop(mode: i32) -> [f64; 4] {
+    let mut b = initialized();
+    let h = handle(&mut b);
+    let (mut m, mut n, mut k, mut dt, mut u_max) = (0u32, 0u32, 0u32, 0.0, 0.0);
+    let mut grads = vec![0.0; 256];
+    let mut s = [0.0; 4];
+    let mut t = 0.0;
+    unsafe {
+        assert_eq!(
+            capsule_mpc_dimensions(&mut m, &mut n, &mut k, &mut dt, &mut u_max),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(capsule_mpc_set_sampling(h, mode), CAPSULE_MPC_OK);
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
+        while t < 3.0 - 1e-9 {
+            if mode == CAPSULE_MPC_SAMPLING_IDEAL {
+                assert_eq!(capsule_mpc_feed_state(h, s.as_ptr(), 4), CAPSULE_MPC_OK);
+            } else {
+                let z = [s[0], s[2]];
+                hold(&mut s, 0.0);
+                assert_eq!(
+                    capsule_mpc_feed_tracking(h, z.as_ptr(), 2, t, 0),
+                    CAPSULE_MPC_OK
+                );
+                t += 0.02;
+            }
+            let (mut samples, mut status) = (0u32, -1i32);
+            let rc = capsule_mpc_next_actuation(
+                h,
+                grads.as_mut_ptr(),
+                k as usize,
+                &mut samples,
+                &mut status,
+            );
+            assert_eq!(rc, CAPSULE_MPC_OK);
+            assert!(samples >= 1 && samples <= n);
+            for &u in &grads[..samples as usize] {
+                assert!(u.abs() <= u_max);
+                hold(&mut s, u);
+                t += dt;
+            }
+        }
+    }
+    s
+}
+
+#[test]
+fn good_path_closed_loop_scenario_c() {
+    for mode in [CAPSULE_MPC_SAMPLING_CONSTANT, CAPSULE_MPC_SAMPLING_IDEAL] {
+        let s = closed_loop(mode);
+        let e1 = (s[0] - TARGET_C[0]).abs();
+        let e2 = (s[2] - TARGET_C[2]).abs();
+        assert!(e1 <= 1e-3 && e2 <= 1e-3, "mode {mode}: final state {s:?}");
+    }
+}

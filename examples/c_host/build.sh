@@ -1,0 +1,9 @@
+#!/bin/sh
+# Builds the capsule-mpc C library and this C host, then runs the host.
+# Usage: ./build.sh [mode] [noise_m]   (mode 0 ideal, 1 constant, 2 variable)
+set -eu
+cd "$(dirname "$0")"
+cargo build --release -p capsule-mpc-capi
+gcc -Wall -Wextra -Werror -std=c11 -O2 main.c -I ../../capi/include \
+    ../../target/release/libcapsule_mpc_capi.a -lm -lpthread -ldl -o c_host
+./c_host "$@"
