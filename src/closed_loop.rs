@@ -153,7 +153,9 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         } else {
             let t_meas = plant.time_s();
             let z = plant.measure_positions();
-            let lost = opts.lose_every.is_some_and(|n| n > 0 && cycle % n == 0);
+            let lost = opts
+                .lose_every
+                .is_some_and(|n| n > 0 && cycle.is_multiple_of(n));
             plant.advance(tracking_s, 0.0, Phase::Track)?;
             if opts.extra_delay_s > 0.0 {
                 plant.advance(opts.extra_delay_s, 0.0, Phase::Track)?;

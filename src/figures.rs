@@ -268,7 +268,6 @@ fn draw_panel<DB: DrawingBackend>(
     let (y0, y1) = panel
         .y_range
         .unwrap_or_else(|| fit_range(&panel.series, &panel.bands));
-    let label_font = (FONT, 15).into_font();
     let mut builder = ChartBuilder::on(cell);
     builder
         .margin(10)
@@ -281,11 +280,48 @@ fn draw_panel<DB: DrawingBackend>(
     let mut chart = builder
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(plot_err)?;
+    match &panel.secondary {
+        None => {
+            draw_primary(&mut chart, panel, fig)?;
+            draw_legend(&mut chart, panel)?;
+        }
+        Some((label, secondary)) => {
+            // The secondary coordinate takes over the right label area, so it
+            // is attached before the primary mesh is drawn.
+            let (s0, s1) = fit_range(secondary, &[]);
+            let mut dual = chart.set_secondary_coord(x0..x1, s0..s1);
+            draw_primary(&mut dual, panel, fig)?;
+            dual.configure_secondary_axes()
+                .y_desc(label)
+                .axis_desc_style((FONT, 15).into_font())
+                .label_style((FONT, 13).into_font())
+                .draw()
+                .map_err(plot_err)?;
+            let area = dual.secondary_plotting_area().clone();
+            for s in secondary {
+                draw_series(&area, s)?;
+                if panel.legend {
+                    add_legend(&mut dual, s)?;
+                }
+            }
+            draw_legend(&mut dual, panel)?;
+        }
+    }
+    Ok(())
+}
+
+/// Mesh, axis labels, bands and series of the primary (left) axis.
+fn draw_primary<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    panel: &Panel,
+    fig: &Figure,
+) -> Result<()> {
+    let (x0, x1) = fig.x_range;
     chart
         .configure_mesh()
         .x_desc(&fig.x_label)
         .y_desc(&panel.y_label)
-        .axis_desc_style(label_font.clone())
+        .axis_desc_style((FONT, 15).into_font())
         .label_style((FONT, 13).into_font())
         .light_line_style(RGBColor(235, 235, 235))
         .bold_line_style(RGBColor(215, 215, 215))
@@ -309,36 +345,8 @@ fn draw_panel<DB: DrawingBackend>(
     }
     for s in &panel.series {
         draw_series(&area, s)?;
-    }
-
-    match &panel.secondary {
-        None => {
-            if panel.legend {
-                for s in &panel.series {
-                    add_legend(&mut chart, s)?;
-                }
-            }
-            draw_legend(&mut chart, panel)?;
-        }
-        Some((label, secondary)) => {
-            let (s0, s1) = fit_range(secondary, &[]);
-            let mut dual = chart.set_secondary_coord(x0..x1, s0..s1);
-            dual.configure_secondary_axes()
-                .y_desc(label)
-                .axis_desc_style(label_font)
-                .label_style((FONT, 13).into_font())
-                .draw()
-                .map_err(plot_err)?;
-            let area2 = dual.secondary_plotting_area().clone();
-            for s in secondary {
-                draw_series(&area2, s)?;
-            }
-            if panel.legend {
-                for s in panel.series.iter().chain(secondary) {
-                    add_legend(&mut dual, s)?;
-                }
-            }
-            draw_legend(&mut dual, panel)?;
+        if panel.legend {
+            add_legend(chart, s)?;
         }
     }
     Ok(())
@@ -392,7 +400,7 @@ fn add_legend<DB: DrawingBackend>(
                 Stroke::Solid | Stroke::Stems => (30, 1),
             };
             let style = ShapeStyle::from(&color).stroke_width(width.max(2));
-            DashedPathElement::new(vec![(x, y), (x + 22, y)].into_iter(), dash, gap, style)
+            DashedPathElement::new(vec![(x, y), (x + 22, y)], dash, gap, style)
         });
     Ok(())
 }
@@ -443,11 +451,17 @@ fn velocities_mm_s(report: &RunReport, i: usize) -> Vec<(f64, f64)> {
 
 /// The gradient (mT/m) as a staircase: `u[k]` holds from `t[k]` to `t[k+1]`.
 fn gradient_mt_per_m(report: &RunReport) -> Vec<(f64, f64)> {
-    let mut points = Vec::with_capacity(2 * report.t.len());
+    let mut points: Vec<(f64, f64)> = Vec::new();
     for (k, (&t, &u)) in report.t.iter().zip(&report.u).enumerate() {
-        points.push((t, u * 1e3));
-        if let Some(&next) = report.t.get(k + 1) {
-            points.push((next, u * 1e3));
+        let Some(&next) = report.t.get(k + 1) else {
+            break;
+        };
+        let u = u * 1e3;
+        match points.last_mut() {
+            // Same level as the step before: extend it (rows are 1 ms apart
+            // while u changes every sample; keeps the SVGs small).
+            Some(last) if last.1 == u => last.0 = next,
+            _ => points.extend([(t, u), (next, u)]),
         }
     }
     points
@@ -961,13 +975,11 @@ mod tests {
     #[test]
     fn gradient_is_a_staircase_in_mt_per_m() {
         let mut report = sample_report();
-        report.t = vec![0.0, 0.02, 0.04];
-        report.u = vec![0.04, -0.01, 0.0];
+        report.t = vec![0.0, 0.01, 0.02, 0.04];
+        report.u = vec![0.04, 0.04, -0.01, 0.0];
+        // Equal consecutive levels merge; the last row has no duration.
         let g = gradient_mt_per_m(&report);
-        assert_eq!(g.len(), 5);
-        assert_eq!(g[0], (0.0, 40.0));
-        assert_eq!(g[1], (0.02, 40.0));
-        assert_eq!(g[2], (0.02, -10.0));
+        assert_eq!(g, [(0.0, 40.0), (0.02, 40.0), (0.02, -10.0), (0.04, -10.0)]);
     }
 
     fn sample_report() -> RunReport {
