@@ -566,7 +566,7 @@ mod tests {
     #[test]
     fn weight_count_must_match_states() {
         let e =
-            with(|t| t.replacen("q = [0.02, 0.001, 0.02, 0.001]", "q = [0.02]", 1)).unwrap_err();
+            with(|t| t.replacen("q = [0.02, 0.0001, 0.02, 0.0001]", "q = [0.02]", 1)).unwrap_err();
         assert!(e.to_string().contains("controller.q"), "{e}");
     }
 }
