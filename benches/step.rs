@@ -1,1 +1,60 @@
-fn main() {}
+//! criterion benches of the online step: the full controller step
+//! (`DefaultController::cycle_full_state`), the generated solver's `solve`,
+//! and one window QP of the active-set engine. Each starts from the warm case
+//! of `capsule-mpc bench` (a first solve, `shift(1)`, the predicted next
+//! state), on states of scenario C's closed loop and one uniform state.
+
+use capsule_mpc::bench::{prototype_controller, ActiveSetEngine, QpEngine, RefProblem, RefSolver};
+use capsule_mpc_generator::config::Config;
+use capsule_mpc_runtime::generated::controller::{solver, spec};
+use criterion::{black_box, criterion_group, criterion_main, BatchSize, Criterion};
+
+/// Relative states: early in scenario C's manoeuvre (fast), and a uniform one.
+const STATES: [(&str, [f64; spec::NX]); 3] = [
+    ("rest_C", [-0.02, 0.0, 0.01, 0.0]),
+    ("moving", [-0.012, 0.12, 0.006, 0.05]),
+    ("uniform", [0.031, -0.21, -0.044, 0.17]),
+];
+
+fn benches(c: &mut Criterion) {
+    let proto = prototype_controller().expect("controller");
+    let problem = RefProblem::from_config(&Config::embedded_default()).expect("config");
+    for (name, e) in STATES {
+        // Warm case: first solve, then the next state after one sample.
+        let mut warm_solver = solver::Solver::new();
+        warm_solver.solve(&e);
+        let e1 = solver::predict(&e, warm_solver.plan(), 1);
+        warm_solver.shift(1);
+        let mut warm_ctl = proto.clone();
+        warm_ctl.cycle_full_state(&e).expect("cycle");
+
+        c.bench_function(&format!("controller_step/{name}"), |b| {
+            b.iter_batched_ref(
+                || warm_ctl.clone(),
+                |ctl| ctl.cycle_full_state(black_box(&e1)),
+                BatchSize::SmallInput,
+            )
+        });
+        c.bench_function(&format!("solver_solve/{name}"), |b| {
+            b.iter_batched_ref(
+                || warm_solver.clone(),
+                |s| s.solve(black_box(&e1)),
+                BatchSize::SmallInput,
+            )
+        });
+        // The first window QP of that warm step (re-built by the reference loop).
+        let mut rs = RefSolver::new();
+        let start = *warm_solver.plan();
+        let (plan, _) = RefSolver::start_plan(&problem, &e1, Some(&start)).expect("table");
+        rs.build_qp(&problem, &e1, &plan);
+        let qp = rs.qp;
+        let mut engine = ActiveSetEngine::default();
+        let mut x = [0.0; spec::N];
+        c.bench_function(&format!("qp_solve/{name}"), |b| {
+            b.iter(|| engine.solve(black_box(&qp), &mut x))
+        });
+    }
+}
+
+criterion_group!(step, benches);
+criterion_main!(step);

@@ -166,6 +166,8 @@ struct Panel {
     /// Fixed y range instead of one fitted to the data.
     y_range: Option<(f64, f64)>,
     legend: bool,
+    /// Where the legend goes (lower right when `None`).
+    legend_pos: Option<SeriesLabelPosition>,
 }
 
 #[derive(Debug, Clone)]
@@ -414,7 +416,12 @@ fn draw_legend<'a, DB: DrawingBackend + 'a>(
     }
     chart
         .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
+        .position(
+            panel
+                .legend_pos
+                .clone()
+                .unwrap_or(SeriesLabelPosition::LowerRight),
+        )
         .background_style(WHITE.mix(0.85))
         .border_style(RGBColor(150, 150, 150))
         .label_font((FONT, 14).into_font())
@@ -862,8 +869,9 @@ fn fig7_instants(out: &Path, constant: &RunReport, variable: &RunReport) -> Resu
                 width: 1,
                 stroke: Stroke::Stems,
             }],
-            y_range: Some((0.0, 1.2)),
+            y_range: Some((0.0, 1.6)),
             legend: true,
+            legend_pos: Some(SeriesLabelPosition::UpperRight),
             ..Panel::default()
         }
     };
