@@ -606,6 +606,17 @@ fn rk4_capsule(i: usize, x: f64, v: f64, u: f64, h: f64) -> ([f64; 2], [f64; 4],
     (next, a, b)
 }
 
+/// 2x2 product p q (row major): chains sub-step Jacobians.
+#[inline]
+fn mat2_mul(p: &[f64; 4], q: &[f64; 4]) -> [f64; 4] {
+    [
+        p[0] * q[0] + p[1] * q[2],
+        p[0] * q[1] + p[1] * q[3],
+        p[2] * q[0] + p[3] * q[2],
+        p[2] * q[1] + p[3] * q[3],
+    ]
+}
+
 /// One controller sample (RK4_SUBSTEPS sub-steps) of capsule `i`, with Jacobians.
 #[inline]
 fn sample_capsule(i: usize, x: f64, v: f64, u: f64) -> ([f64; 2], [f64; 4], [f64; 2]) {
@@ -616,12 +627,7 @@ fn sample_capsule(i: usize, x: f64, v: f64, u: f64) -> ([f64; 2], [f64; 4], [f64
     let mut n = 0;
     while n < RK4_SUBSTEPS {
         let (next, sa, sb) = rk4_capsule(i, s[0], s[1], u, h);
-        a = [
-            sa[0] * a[0] + sa[1] * a[2],
-            sa[0] * a[1] + sa[1] * a[3],
-            sa[2] * a[0] + sa[3] * a[2],
-            sa[2] * a[1] + sa[3] * a[3],
-        ];
+        a = mat2_mul(&sa, &a);
         b = [
             sa[0] * b[0] + sa[1] * b[1] + sb[0],
             sa[2] * b[0] + sa[3] * b[1] + sb[1],
@@ -731,12 +737,7 @@ pub fn capsule_transition(i: usize, xv: [f64; 2], u: f64, duration_s: f64) -> ([
     let mut n = 0;
     while n < steps {
         let (next, sa, _) = rk4_capsule(i, s[0], s[1], u, h);
-        a = [
-            sa[0] * a[0] + sa[1] * a[2],
-            sa[0] * a[1] + sa[1] * a[3],
-            sa[2] * a[0] + sa[3] * a[2],
-            sa[2] * a[1] + sa[3] * a[3],
-        ];
+        a = mat2_mul(&sa, &a);
         s = next;
         n += 1;
     }

@@ -348,18 +348,22 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let mut grads = [0.0; K];
         let mut growth: f64 = 1.0;
         let mut state = *e;
+        // Q recovered once from the stage cost of unit vectors (the spec's
+        // weights, not a second copy of them).
+        let mut q = [0.0; NX];
         let mut q_max: f64 = 0.0;
+        for (j, qj) in q.iter_mut().enumerate() {
+            let mut unit = [0.0; NX];
+            unit[j] = 1.0;
+            *qj = S::stage_cost(&unit, 0.0);
+            q_max = q_max.max(*qj);
+        }
         for (k, &u) in plan.iter().enumerate() {
             costs[k] = S::stage_cost(&state, u);
-            // |grad (e'Qe)| = |2 Q e|, with Q recovered from the stage cost
-            // of unit vectors (the spec's weights, no duplication).
+            // |grad (e'Qe)| = |2 Q e|.
             let mut g2 = 0.0;
             for j in 0..NX {
-                let mut unit = [0.0; NX];
-                unit[j] = 1.0;
-                let qj = S::stage_cost(&unit, 0.0);
-                q_max = q_max.max(qj);
-                g2 += sq(2.0 * qj * state[j]);
+                g2 += sq(2.0 * q[j] * state[j]);
             }
             grads[k] = libm::sqrt(g2);
             // Local growth: infinity norm of each capsule's sampled Jacobian.
