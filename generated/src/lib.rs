@@ -84,6 +84,10 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     fn reset(&mut self);
     /// Drops `samples` applied inputs from the front of the plan.
     fn shift(&mut self, samples: usize);
+    /// The plan is played in actuation phases of `samples_per_phase`
+    /// samples, each followed by `coast_s` of zero gradient (tracking +
+    /// delay); `coast_s = 0` for back-to-back samples.
+    fn set_schedule(&mut self, samples_per_phase: usize, coast_s: f64);
     /// Refines the plan from relative state `e`.
     fn solve(&mut self, e: &[f64; NX]) -> SolveReport;
     /// Current plan, T/m per sample.

@@ -153,6 +153,59 @@ pub mod solver {
         tail_hess: [[f64; 4]; M],
         tail_grad: [f64; NX],
         qp: BoxQp,
+        /// The actuation schedule the plan is refined for.
+        schedule: Schedule,
+    }
+    /// How the scanner plays the plan: actuation phases of `samples_per_phase`
+    /// samples back to back, each followed by a zero-gradient coast (tracking
+    /// + delay). Ideal sampling has no coast. Modelling the gaps makes the
+    /// plan match what is played, so re-plans do not fight them.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct Schedule {
+        /// Samples per actuation phase (>= 1).
+        samples_per_phase: usize,
+        /// RK4 sub-steps of the coast after each phase (0: no coast).
+        coast_steps: usize,
+        /// Sub-step length, s.
+        coast_h_s: f64,
+    }
+    /// Longest coast a schedule models after a phase, s.
+    pub const MAX_COAST_S: f64 = 1.0;
+    impl Schedule {
+        pub const BACK_TO_BACK: Schedule = Schedule {
+            samples_per_phase: K,
+            coast_steps: 0,
+            coast_h_s: 0.0,
+        };
+        /// Phases of `samples_per_phase` samples (clamped to 1..=K), each
+        /// followed by `coast_s` (clamped to 0..=MAX_COAST_S; NaN reads as 0).
+        pub fn new(samples_per_phase: usize, coast_s: f64) -> Schedule {
+            let c = if coast_s > MAX_COAST_S {
+                MAX_COAST_S
+            } else if coast_s > 0.0 {
+                coast_s
+            } else {
+                return Schedule::BACK_TO_BACK;
+            };
+            let max_h = DT_S / RK4_SUBSTEPS as f64;
+            let steps = libm::ceil(c / max_h) as usize;
+            Schedule {
+                samples_per_phase: if samples_per_phase == 0 {
+                    1
+                } else if samples_per_phase > K {
+                    K
+                } else {
+                    samples_per_phase
+                },
+                coast_steps: steps,
+                coast_h_s: c / steps as f64,
+            }
+        }
+        /// Whether a coast follows plan sample `k`.
+        #[inline]
+        fn coasts_after(&self, k: usize) -> bool {
+            self.coast_steps > 0 && (k + 1) % self.samples_per_phase == 0
+        }
     }
     impl Default for Solver {
         fn default() -> Self {
@@ -171,7 +224,12 @@ pub mod solver {
                 tail_hess: [[0.0; 4]; M],
                 tail_grad: [0.0; NX],
                 qp: BoxQp::new(),
+                schedule: Schedule::BACK_TO_BACK,
             }
+        }
+        /// Sets the actuation schedule the plan is refined for.
+        pub fn set_schedule(&mut self, samples_per_phase: usize, coast_s: f64) {
+            self.schedule = Schedule::new(samples_per_phase, coast_s);
         }
         /// Forgets the plan (new target, or after a fault).
         pub fn reset(&mut self) {
@@ -223,14 +281,14 @@ pub mod solver {
                 max_qp_iterations: 0,
             };
             let mut cost = if self.has_plan {
-                rollout_cost(e, &self.plan)
+                rollout_cost(e, &self.plan, &self.schedule)
             } else {
                 f64::INFINITY
             };
             if USE_TABLES {
                 match lookup_tail(e, &mut self.candidate) {
                     Some(()) => {
-                        let c = rollout_cost(e, &self.candidate);
+                        let c = rollout_cost(e, &self.candidate, &self.schedule);
                         if c < cost {
                             self.plan = self.candidate;
                             cost = c;
@@ -264,7 +322,13 @@ pub mod solver {
         }
         /// One SQP iteration; returns (cost after, QP iterations, QP converged).
         fn sqp_iteration(&mut self, e: &[f64; NX], cost: f64) -> (f64, u32, bool) {
-            rollout_with_jacobians(e, &self.plan, &mut self.states, &mut self.jac);
+            rollout_with_jacobians(
+                e,
+                &self.plan,
+                &self.schedule,
+                &mut self.states,
+                &mut self.jac,
+            );
             self.tail_cost_to_go();
             self.window_sensitivities();
             self.condense();
@@ -278,7 +342,7 @@ pub mod solver {
                     self.candidate[j] = clamp_u(self.plan[j] + step * self.qp.x[j]);
                     j += 1;
                 }
-                let c = rollout_cost(e, &self.candidate);
+                let c = rollout_cost(e, &self.candidate, &self.schedule);
                 if c < cost {
                     self.plan = self.candidate;
                     return (c, iters, converged);
@@ -695,13 +759,16 @@ pub mod solver {
             p[2] * q[1] + p[3] * q[3],
         ]
     }
-    /// One controller sample (RK4_SUBSTEPS sub-steps) of capsule `i`, with Jacobians.
+    /// Plan sample `k` (RK4_SUBSTEPS sub-steps) of capsule `i` and the
+    /// schedule's coast after it, if any, with Jacobians.
     #[inline]
     fn sample_capsule(
         i: usize,
         x: f64,
         v: f64,
         u: f64,
+        k: usize,
+        schedule: &Schedule,
     ) -> ([f64; 2], [f64; 4], [f64; 2]) {
         let h = DT_S / RK4_SUBSTEPS as f64;
         let mut s = [x, v];
@@ -715,6 +782,19 @@ pub mod solver {
                 sa[0] * b[0] + sa[1] * b[1] + sb[0],
                 sa[2] * b[0] + sa[3] * b[1] + sb[1],
             ];
+            s = next;
+            n += 1;
+        }
+        let coast_steps = if schedule.coasts_after(k) {
+            schedule.coast_steps
+        } else {
+            0
+        };
+        let mut n = 0;
+        while n < coast_steps {
+            let (next, sa, _) = rk4_capsule(i, s[0], s[1], 0.0, schedule.coast_h_s);
+            a = mat2_mul(&sa, &a);
+            b = [sa[0] * b[0] + sa[1] * b[1], sa[2] * b[0] + sa[3] * b[1]];
             s = next;
             n += 1;
         }
@@ -739,7 +819,7 @@ pub mod solver {
         c
     }
     /// Nonlinear cost of `plan` from `e0` over K samples (no Jacobians).
-    pub fn rollout_cost(e0: &[f64; NX], plan: &[f64; K]) -> f64 {
+    pub fn rollout_cost(e0: &[f64; NX], plan: &[f64; K], schedule: &Schedule) -> f64 {
         let mut e = *e0;
         let mut cost = 0.0;
         let mut k = 0;
@@ -747,7 +827,14 @@ pub mod solver {
             cost += stage_cost(&e, plan[k]);
             let mut i = 0;
             while i < M {
-                let (next, _, _) = sample_capsule(i, e[2 * i], e[2 * i + 1], plan[k]);
+                let (next, _, _) = sample_capsule(
+                    i,
+                    e[2 * i],
+                    e[2 * i + 1],
+                    plan[k],
+                    k,
+                    schedule,
+                );
                 e[2 * i] = next[0];
                 e[2 * i + 1] = next[1];
                 i += 1;
@@ -760,6 +847,7 @@ pub mod solver {
     fn rollout_with_jacobians(
         e0: &[f64; NX],
         plan: &[f64; K],
+        schedule: &Schedule,
         states: &mut [[f64; NX]; K + 1],
         jac: &mut [StepJacobian; K],
     ) {
@@ -773,6 +861,8 @@ pub mod solver {
                     states[k][2 * i],
                     states[k][2 * i + 1],
                     plan[k],
+                    k,
+                    schedule,
                 );
                 states[k + 1][2 * i] = next[0];
                 states[k + 1][2 * i + 1] = next[1];
@@ -790,7 +880,14 @@ pub mod solver {
         while k < samples && k < K {
             let mut i = 0;
             while i < M {
-                let (next, _, _) = sample_capsule(i, e[2 * i], e[2 * i + 1], plan[k]);
+                let (next, _, _) = sample_capsule(
+                    i,
+                    e[2 * i],
+                    e[2 * i + 1],
+                    plan[k],
+                    k,
+                    &Schedule::BACK_TO_BACK,
+                );
                 e[2 * i] = next[0];
                 e[2 * i + 1] = next[1];
                 i += 1;
@@ -855,6 +952,9 @@ pub mod solver {
         }
         fn shift(&mut self, samples: usize) {
             Solver::shift(self, samples)
+        }
+        fn set_schedule(&mut self, samples_per_phase: usize, coast_s: f64) {
+            Solver::set_schedule(self, samples_per_phase, coast_s)
         }
         fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
             Solver::solve(self, e)

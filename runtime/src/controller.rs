@@ -47,7 +47,31 @@ pub struct ControllerSettings {
     pub disturbance_bound: f64,
     /// Largest actuation length, samples (<= N).
     pub max_actuation_samples: usize,
+    /// Terminal hold (dual-mode MPC): entered when every estimated position
+    /// error is within `hold_enter_position_m` and every speed within
+    /// `hold_enter_speed_m_per_s`; left when a position error exceeds
+    /// `hold_release_position_m` or a speed `hold_release_speed_m_per_s`.
+    /// Inside, a gentle linear law damps the capsules' common motion instead
+    /// of re-planning separation manoeuvres for errors at the noise level.
+    pub hold_enter_position_m: f64,
+    pub hold_enter_speed_m_per_s: f64,
+    pub hold_release_position_m: f64,
+    pub hold_release_speed_m_per_s: f64,
 }
+
+/// Default hold entry: half the 1 mm settle tolerance, m.
+pub const HOLD_ENTER_POSITION_M: f64 = 0.5e-3;
+/// Default hold entry speed: half the 5 mm/s settle tolerance, m/s.
+pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 2.5e-3;
+/// Default hold release: 0.8 of the settle tolerance, m (hysteresis keeps
+/// estimate noise from toggling the mode).
+pub const HOLD_RELEASE_POSITION_M: f64 = 0.8e-3;
+/// Default hold release speed, m/s.
+pub const HOLD_RELEASE_SPEED_M_PER_S: f64 = 10.0e-3;
+/// Natural frequency of the hold law, rad/s (critically damped).
+pub const HOLD_NATURAL_FREQUENCY_RAD_PER_S: f64 = 6.0;
+/// The hold law uses at most this fraction of u_max.
+pub const HOLD_MAX_GRADIENT_FRACTION: f64 = 0.25;
 
 /// Normalized innovation squared above which a measurement is rejected
 /// (10 sigma: only gross outliers and wrong data).
@@ -117,6 +141,10 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     applied_samples: usize,
     /// Last solver cost, for the decrease check (18).
     last_cost: f64,
+    /// Inside the terminal hold set (see [`ControllerSettings`]).
+    holding: bool,
+    /// Samples per actuation phase the plan is refined for.
+    planned_phase_samples: usize,
 }
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
@@ -131,6 +159,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             position_noise_m: S::POSITION_NOISE_M,
             disturbance_bound: 0.0,
             max_actuation_samples: S::N,
+            hold_enter_position_m: HOLD_ENTER_POSITION_M,
+            hold_enter_speed_m_per_s: HOLD_ENTER_SPEED_M_PER_S,
+            hold_release_position_m: HOLD_RELEASE_POSITION_M,
+            hold_release_speed_m_per_s: HOLD_RELEASE_SPEED_M_PER_S,
         }
     }
 
@@ -146,6 +178,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             has_target: false,
             applied_samples: 0,
             last_cost: f64::INFINITY,
+            holding: false,
+            planned_phase_samples: settings.max_actuation_samples,
         };
         c.reset(positions_m)?;
         Ok(c)
@@ -164,10 +198,40 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         for (i, &p) in positions_m.iter().enumerate() {
             self.filters[i] = CapsuleFilter::new(p, std);
         }
+        self.restart_plan();
+        Ok(())
+    }
+
+    /// Forgets the plan and the mode (new start state or new target).
+    fn restart_plan(&mut self) {
         self.solver.reset();
         self.applied_samples = 0;
         self.last_cost = f64::INFINITY;
-        Ok(())
+        self.holding = false;
+        self.planned_phase_samples = self.settings.max_actuation_samples;
+        self.update_schedule();
+    }
+
+    /// Tells the solver how the plan will be played: ideal sampling plays
+    /// it back to back; otherwise each actuation phase is followed by
+    /// tracking + delay at zero gradient.
+    fn update_schedule(&mut self) {
+        let (samples, coast_s) = match self.settings.sampling {
+            Sampling::Ideal => (S::N, 0.0),
+            Sampling::Constant => (1, self.wait_s()),
+            Sampling::Variable => (self.planned_phase_samples, self.wait_s()),
+        };
+        self.solver.set_schedule(samples, coast_s);
+    }
+
+    /// Tracking phase + extra delay, s.
+    fn wait_s(&self) -> f64 {
+        self.settings.tracking_time_s + self.settings.extra_delay_s
+    }
+
+    /// Whether the last cycle was in the terminal hold.
+    pub fn holding(&self) -> bool {
+        self.holding
     }
 
     pub fn settings(&self) -> &ControllerSettings {
@@ -205,8 +269,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
         self.target = *target;
         self.has_target = true;
-        self.solver.reset();
-        self.last_cost = f64::INFINITY;
+        self.restart_plan();
         Ok(())
     }
 
@@ -313,6 +376,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             return out;
         }
         let e = self.relative(x, &self.target);
+        if self.update_hold(&e) {
+            out.gradients_t_per_m[0] = self.hold_gradient(&e);
+            self.applied_samples = 0;
+            return out;
+        }
         self.solver.shift(self.applied_samples);
         let report = self.solver.solve(&e);
         out.solve = Some(report);
@@ -338,7 +406,58 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         out.actuation_samples = n;
         self.applied_samples = n;
         self.last_cost = report.cost;
+        if self.settings.sampling == Sampling::Variable {
+            // Plan the next phase one sample longer than this one: the
+            // rule may extend it, and the model stays close to what plays.
+            self.planned_phase_samples = (n + 1).min(self.settings.max_actuation_samples);
+            self.update_schedule();
+        }
         out
+    }
+
+    /// Enters or leaves the terminal hold (with hysteresis); true inside.
+    fn update_hold(&mut self, e: &[f64; NX]) -> bool {
+        let s = &self.settings;
+        let within = |pos_m: f64, speed: f64| {
+            (0..NX / 2).all(|i| libm::fabs(e[2 * i]) <= pos_m && libm::fabs(e[2 * i + 1]) <= speed)
+        };
+        let was = self.holding;
+        self.holding = if was {
+            within(s.hold_release_position_m, s.hold_release_speed_m_per_s)
+        } else {
+            within(s.hold_enter_position_m, s.hold_enter_speed_m_per_s)
+        };
+        if was && !self.holding {
+            // Re-plan from the tables, not from the plan before the hold.
+            self.solver.reset();
+            self.planned_phase_samples = self.settings.max_actuation_samples;
+            self.update_schedule();
+        }
+        self.holding
+    }
+
+    /// The hold law: critically damped PD on the capsules' mean error (the
+    /// one mode a single gradient controls near rest), scaled by the duty
+    /// of the schedule and bounded by a fraction of u_max.
+    fn hold_gradient(&self, e: &[f64; NX]) -> f64 {
+        let m = NX / 2;
+        let (mut mean_x, mut mean_v, mut mean_g) = (0.0, 0.0, 0.0);
+        for i in 0..m {
+            mean_x += e[2 * i] / m as f64;
+            mean_v += e[2 * i + 1] / m as f64;
+            mean_g += gradient_gain::<S, NX, K>(i) / m as f64;
+        }
+        if !(mean_g > 0.0) {
+            return 0.0;
+        }
+        let w = HOLD_NATURAL_FREQUENCY_RAD_PER_S;
+        let period_s = match self.settings.sampling {
+            Sampling::Ideal => S::DT_S,
+            Sampling::Constant | Sampling::Variable => S::DT_S + self.wait_s(),
+        };
+        let accel = -(w * w * mean_x + 2.0 * w * mean_v) * period_s / S::DT_S;
+        let bound = HOLD_MAX_GRADIENT_FRACTION * S::U_MAX_T_PER_M;
+        (accel / mean_g).clamp(-bound, bound)
     }
 
     /// Switching rule along the predicted plan from `e`.
@@ -427,14 +546,19 @@ pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     let mut mean_g = 0.0;
     for i in 0..m {
         mean_v += x[2 * i + 1] / m as f64;
-        // Acceleration per gradient from a one-sample prediction at rest.
-        let (next, _) = S::capsule_transition(i, [0.0, 0.0], 1.0, S::DT_S);
-        mean_g += next[1] / S::DT_S / m as f64;
+        mean_g += gradient_gain::<S, NX, K>(i) / m as f64;
     }
     if mean_g.is_nan() || mean_g <= 0.0 || !mean_v.is_finite() {
         return 0.0;
     }
     (-mean_v / (mean_g * S::DT_S)).clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M)
+}
+
+/// Capsule `i`'s acceleration per unit gradient near rest, (m/s^2)/(T/m),
+/// from a one-sample prediction of the model (no second copy of g_i).
+fn gradient_gain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(i: usize) -> f64 {
+    let (next, _) = S::capsule_transition(i, [0.0, 0.0], 1.0e-3, S::DT_S);
+    next[1] / (1.0e-3 * S::DT_S)
 }
 
 fn check_settings(s: &ControllerSettings, n: usize) -> Result<(), RuntimeError> {
@@ -453,6 +577,22 @@ fn check_settings(s: &ControllerSettings, n: usize) -> Result<(), RuntimeError> 
     }
     if s.max_actuation_samples == 0 || s.max_actuation_samples > n {
         return Err(RuntimeError::BadSetting("max_actuation_samples"));
+    }
+    let tolerance = |v: f64| v.is_finite() && v >= 0.0 && v <= MAX_ABS_POSITION_M;
+    if !tolerance(s.hold_enter_position_m) {
+        return Err(RuntimeError::BadSetting("hold_enter_position_m"));
+    }
+    if !tolerance(s.hold_enter_speed_m_per_s) {
+        return Err(RuntimeError::BadSetting("hold_enter_speed_m_per_s"));
+    }
+    if !tolerance(s.hold_release_position_m) || s.hold_release_position_m < s.hold_enter_position_m
+    {
+        return Err(RuntimeError::BadSetting("hold_release_position_m"));
+    }
+    if !tolerance(s.hold_release_speed_m_per_s)
+        || s.hold_release_speed_m_per_s < s.hold_enter_speed_m_per_s
+    {
+        return Err(RuntimeError::BadSetting("hold_release_speed_m_per_s"));
     }
     Ok(())
 }
