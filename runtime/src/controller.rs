@@ -4,7 +4,8 @@
 use crate::estimator::CapsuleFilter;
 use crate::generated::{PlanSolver, SolveReport, SolveStatus};
 use crate::switching::{
-    paper_actuation_samples, tight_actuation_samples, PaperConstants, TightInputs,
+    extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
+    PaperConstants, TightInputs,
 };
 
 /// How the scanner interleaves tracking and actuation.
@@ -465,8 +466,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let plan = self.solver.plan();
         let mut costs = [0.0; K];
         let mut grads = [0.0; K];
-        let mut growth: f64 = 1.0;
-        let mut state = *e;
+        let mut deviation = [0.0; K];
         // Q recovered once from the stage cost of unit vectors (the spec's
         // weights, not a second copy of them).
         let mut q = [0.0; NX];
@@ -477,6 +477,14 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             *qj = S::stage_cost(&unit, 0.0);
             q_max = q_max.max(*qj);
         }
+        // The estimate's 3-sigma box per capsule, propagated along the plan.
+        let mut start = [[0.0; 2]; K2];
+        for (b, f) in start.iter_mut().zip(&self.filters) {
+            *b = [3.0 * f.position_std_m(), 3.0 * f.speed_std_m_per_s()];
+        }
+        let mut boxes = start;
+        let gamma_dt = self.settings.disturbance_bound * S::DT_S;
+        let mut state = *e;
         for (k, &u) in plan.iter().enumerate() {
             costs[k] = S::stage_cost(&state, u);
             // |grad (e'Qe)| = |2 Q e|.
@@ -485,13 +493,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 g2 += sq(2.0 * q[j] * state[j]);
             }
             grads[k] = libm::sqrt(g2);
-            // Local growth: infinity norm of each capsule's sampled Jacobian.
             for i in 0..NX / 2 {
                 let (_, a) = S::capsule_transition(i, [state[2 * i], state[2 * i + 1]], u, S::DT_S);
-                let row0 = a[0].abs() + a[1].abs();
-                let row1 = a[2].abs() + a[3].abs();
-                growth = growth.max(row0.max(row1));
+                boxes[i] = propagate_error_box(&a, boxes[i], gamma_dt);
             }
+            deviation[k] = extra_deviation_bound(&boxes[..NX / 2], &start[..NX / 2]);
             state = S::predict_plan(&state, &single(u), 1);
         }
         match self.settings.switching {
@@ -507,18 +513,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 paper_actuation_samples(&c, &costs[..n_max], S::DT_S, S::N as f64 * S::DT_S)
             }
             SwitchingRule::Tight => {
-                let mut err2 = 0.0;
-                for i in 0..NX / 2 {
-                    err2 += 9.0 * (self.filters[i].cov[0] + self.filters[i].cov[3]);
-                }
                 let inp = TightInputs {
                     stage_costs: &costs,
                     cost_gradients: &grads,
+                    extra_deviation: &deviation,
                     q_max,
-                    growth_per_sample: growth,
-                    estimate_error: libm::sqrt(err2),
-                    gamma: self.settings.disturbance_bound,
-                    dt_s: S::DT_S,
                     sigma: S::SWITCHING_SIGMA,
                 };
                 tight_actuation_samples(&inp, n_max)

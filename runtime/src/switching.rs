@@ -62,36 +62,62 @@ pub struct TightInputs<'a> {
     pub stage_costs: &'a [f64],
     /// ||grad L(e_k)|| = ||2 Q e_k|| along the prediction.
     pub cost_gradients: &'a [f64],
+    /// `extra_deviation[n - 1]`: bound on how much farther the true state
+    /// is from the prediction after n open-loop samples than it is at the
+    /// measurement (see [`extra_deviation_bound`]), SI norm.
+    pub extra_deviation: &'a [f64],
     /// Largest eigenvalue of the stage weight (max Q_jj).
     pub q_max: f64,
-    /// Growth factor per sample of a state error (infinity norm of the
-    /// sampled Jacobian, max over the plan).
-    pub growth_per_sample: f64,
-    /// Current estimation error bound (3 sigma of the estimator), SI norm.
-    pub estimate_error: f64,
-    /// Disturbance bound gamma, SI.
-    pub gamma: f64,
-    pub dt_s: f64,
     pub sigma: f64,
 }
 
-/// Tighter rule: the prediction error after n samples is bounded by
-/// `delta_n = rho^n (eps0 + gamma n dt)` (discrete Gronwall with the local
-/// growth rho measured on the plan, instead of L_f on all of X), and the
-/// cost mismatch for k >= n by `|grad L(e_k)| delta_n + q_max delta_n^2`
-/// (exact for a quadratic L), instead of the global L_l. Actuate while the
-/// summed mismatch over the rest of the prediction stays below sigma times
-/// the cost already earned: the same decrease (18) with honest local
-/// constants. Returns n in 1..=n_max.
+/// Per-capsule interval bound on the prediction error: starting from the
+/// estimate's box `(dx0, dv0)` (3 sigma), each sample maps it through the
+/// element-wise absolute sampled Jacobian and adds the disturbance
+/// `gamma * dt` on both components. Returns the new box. This bounds the
+/// linearized error exactly (triangle inequality per component).
+pub fn propagate_error_box(a: &[f64; 4], box_xv: [f64; 2], gamma_dt: f64) -> [f64; 2] {
+    [
+        libm::fabs(a[0]) * box_xv[0] + libm::fabs(a[1]) * box_xv[1] + gamma_dt,
+        libm::fabs(a[2]) * box_xv[0] + libm::fabs(a[3]) * box_xv[1] + gamma_dt,
+    ]
+}
+
+/// Extra deviation after n samples: the part of the propagated error box
+/// that exceeds the box at the measurement (component-wise, >= 0), as a
+/// Euclidean norm over all capsules. Tracking now would reset the error to
+/// the estimate's box; actuating longer lets the speed error integrate into
+/// position and the disturbance accumulate. That growth, not the estimate's
+/// own error (present whatever n is), is what open-loop actuation costs.
+pub fn extra_deviation_bound(now: &[[f64; 2]], start: &[[f64; 2]]) -> f64 {
+    let mut s2 = 0.0;
+    for (b, b0) in now.iter().zip(start) {
+        for c in 0..2 {
+            let d = (b[c] - b0[c]).max(0.0);
+            s2 += d * d;
+        }
+    }
+    libm::sqrt(s2)
+}
+
+/// Tighter rule: actuate n samples while the cost the extra deviation
+/// `delta_n` can add to the rest of the plan stays below sigma times the
+/// cost already earned: for a quadratic L, |L(e + d) - L(e)| <=
+/// ||grad L(e)|| ||d|| + q_max ||d||^2, summed over k >= n. This is the
+/// decrease (18) with local constants measured on the plan (instead of
+/// L_l, L_v and L_f over all of X x U) and the estimator's actual error
+/// instead of the diameter of X. Returns n in 1..=n_max.
 pub fn tight_actuation_samples(inp: &TightInputs, n_max: usize) -> usize {
-    let len = inp.stage_costs.len().min(inp.cost_gradients.len());
+    let len = inp
+        .stage_costs
+        .len()
+        .min(inp.cost_gradients.len())
+        .min(inp.extra_deviation.len());
     let mut earned = 0.0;
     let mut best = 1;
-    let mut rho_n = 1.0;
     for n in 1..=n_max.min(len) {
         earned += inp.stage_costs[n - 1];
-        rho_n *= inp.growth_per_sample;
-        let delta = rho_n * (inp.estimate_error + inp.gamma * n as f64 * inp.dt_s);
+        let delta = inp.extra_deviation[n - 1];
         let mut mismatch = 0.0;
         for k in n..len {
             mismatch += inp.cost_gradients[k] * delta + inp.q_max * delta * delta;
@@ -147,14 +173,12 @@ mod tests {
     fn tight_rule_extends_when_far_and_shortens_when_close() {
         let far = [1.0; 10];
         let grads = [1.0; 10];
+        let deviation: [f64; 10] = core::array::from_fn(|n| 1e-3 * (n + 1) as f64);
         let inp = TightInputs {
             stage_costs: &far,
             cost_gradients: &grads,
+            extra_deviation: &deviation,
             q_max: 1.0,
-            growth_per_sample: 1.01,
-            estimate_error: 1e-3,
-            gamma: 1e-3,
-            dt_s: 0.02,
             sigma: 0.5,
         };
         assert_eq!(tight_actuation_samples(&inp, 10), 10);
@@ -164,5 +188,38 @@ mod tests {
             ..inp
         };
         assert_eq!(tight_actuation_samples(&inp, 10), 1);
+    }
+
+    /// Hand-computed: costs 1, 1, 1; gradients 1; deviations 0.1, 0.3, 1;
+    /// q_max 0; sigma 0.5. n = 1: mismatch 2 * 0.1 = 0.2 <= 0.5;
+    /// n = 2: 1 * 0.3 = 0.3 <= 1.0; n = 3: nothing left, 0 <= 1.5 -> 3.
+    /// With deviations 0.1, 1.5: n = 2 gives 1.5 > 1.0 -> 1.
+    #[test]
+    fn tight_rule_matches_hand_computation() {
+        let inp = TightInputs {
+            stage_costs: &[1.0, 1.0, 1.0],
+            cost_gradients: &[1.0, 1.0, 1.0],
+            extra_deviation: &[0.1, 0.3, 1.0],
+            q_max: 0.0,
+            sigma: 0.5,
+        };
+        assert_eq!(tight_actuation_samples(&inp, 3), 3);
+        assert_eq!(tight_actuation_samples(&inp, 2), 2);
+        let inp = TightInputs {
+            extra_deviation: &[0.1, 1.5, 1.5],
+            ..inp
+        };
+        assert_eq!(tight_actuation_samples(&inp, 3), 1);
+    }
+
+    #[test]
+    fn error_box_grows_by_speed_error_times_time() {
+        // A double integrator sample of 0.02 s: x error grows by dv * dt.
+        let a = [1.0, 0.02, 0.0, 1.0];
+        let b = propagate_error_box(&a, [1e-4, 3e-3], 0.0);
+        assert!((b[0] - (1e-4 + 0.02 * 3e-3)).abs() < 1e-15);
+        assert_eq!(b[1], 3e-3);
+        let extra = extra_deviation_bound(&[b], &[[1e-4, 3e-3]]);
+        assert!((extra - 6e-5).abs() < 1e-15);
     }
 }
