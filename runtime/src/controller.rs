@@ -66,9 +66,11 @@ pub const HOLD_ENTER_POSITION_M: f64 = 0.5e-3;
 pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 2.5e-3;
 /// Default hold release: 0.8 of the settle tolerance, m (hysteresis keeps
 /// estimate noise from toggling the mode).
-pub const HOLD_RELEASE_POSITION_M: f64 = 0.8e-3;
+pub const HOLD_RELEASE_POSITION_M: f64 = 1.0e-3;
 /// Default hold release speed, m/s.
 pub const HOLD_RELEASE_SPEED_M_PER_S: f64 = 10.0e-3;
+/// How far ahead the hold entry extrapolates the capsules' relative drift, s.
+pub const HOLD_DRIFT_HORIZON_S: f64 = 1.0;
 /// Natural frequency of the hold law, rad/s (critically damped).
 pub const HOLD_NATURAL_FREQUENCY_RAD_PER_S: f64 = 6.0;
 /// The hold law uses at most this fraction of u_max.
@@ -427,6 +429,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             within(s.hold_release_position_m, s.hold_release_speed_m_per_s)
         } else {
             within(s.hold_enter_position_m, s.hold_enter_speed_m_per_s)
+                && relative_drift_within(e, s.hold_enter_position_m)
         };
         if was && !self.holding {
             // Re-plan from the tables, not from the plan before the hold.
@@ -551,6 +554,24 @@ pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         return 0.0;
     }
     (-mean_v / (mean_g * S::DT_S)).clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M)
+}
+
+/// Near rest one gradient moves every capsule alike: the motion relative to
+/// the capsules' mean is beyond the hold law. True when that relative
+/// motion, extrapolated over [`HOLD_DRIFT_HORIZON_S`], keeps every capsule
+/// within `position_m` of the mean-corrected target.
+fn relative_drift_within<const NX: usize>(e: &[f64; NX], position_m: f64) -> bool {
+    let m = NX / 2;
+    let (mut mean_x, mut mean_v) = (0.0, 0.0);
+    for i in 0..m {
+        mean_x += e[2 * i] / m as f64;
+        mean_v += e[2 * i + 1] / m as f64;
+    }
+    (0..m).all(|i| {
+        let d = e[2 * i] - mean_x;
+        let w = e[2 * i + 1] - mean_v;
+        libm::fabs(d + w * HOLD_DRIFT_HORIZON_S) <= position_m
+    })
 }
 
 /// Capsule `i`'s acceleration per unit gradient near rest, (m/s^2)/(T/m),
