@@ -134,6 +134,9 @@ pub struct SimulateArgs {
     /// tracking time and delay (the paper's way).
     #[arg(long)]
     pub no_delay_compensation: bool,
+    /// No terminal hold near the target: the MPC re-plans to the end.
+    #[arg(long)]
+    pub no_hold: bool,
     /// Lose every N-th tracking frame.
     #[arg(long, value_name = "N")]
     pub lose_every: Option<usize>,

@@ -40,6 +40,9 @@ pub struct RunOptions {
     /// Drop every n-th measurement (None: keep all).
     pub lose_every: Option<usize>,
     pub preset: Preset,
+    /// Terminal hold near the target (off: the MPC re-plans to the end,
+    /// as the paper's controller does).
+    pub hold: bool,
 }
 
 impl RunOptions {
@@ -57,6 +60,7 @@ impl RunOptions {
             extra_delay_s: config.scanner.extra_delay_s,
             lose_every: None,
             preset: Preset::Default,
+            hold: true,
         }
     }
 }
@@ -118,6 +122,11 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     settings.extra_delay_s = opts.extra_delay_s;
     settings.position_noise_m = opts.position_noise_m;
     settings.disturbance_bound = opts.disturbance.bound_si();
+    if !opts.hold || opts.preset == Preset::Paper {
+        // Zero-size entry set: the hold is never entered.
+        settings.hold_enter_position_m = 0.0;
+        settings.hold_enter_speed_m_per_s = 0.0;
+    }
     let positions: Vec<f64> = x0.iter().step_by(2).copied().collect();
     let mut ctl = Controller::<S, NX, K>::new(settings, &positions)
         .map_err(|e| anyhow::anyhow!("controller settings: {e:?}"))?;
@@ -218,6 +227,7 @@ pub fn simulate_cli(args: &SimulateArgs) -> Result<()> {
     opts.switching = args.switching.into();
     opts.compensate_delay = !args.no_delay_compensation;
     opts.lose_every = args.lose_every;
+    opts.hold = !args.no_hold;
     if let Some(d) = args.extra_delay {
         opts.extra_delay_s = d;
     }
@@ -229,7 +239,7 @@ pub fn simulate_cli(args: &SimulateArgs) -> Result<()> {
     report.disturbance = Some(format!("{:?}", args.disturbance).to_lowercase());
     let m = &report.metrics;
     println!(
-        "scenario {} ({} sampling, {:?} preset, disturbance {:?}, seed {}): settle {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} | bound violations {} | max step {:.1} us",
+        "scenario {} ({} sampling, {:?} preset, disturbance {:?}, seed {}): settle {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
         args.scenario_name(),
         args.sampling.name(),
         args.preset,
@@ -239,6 +249,7 @@ pub fn simulate_cli(args: &SimulateArgs) -> Result<()> {
         m.final_position_error_m * 1e3,
         m.max_abs_u * 1e3,
         m.duty_cycle,
+        m.duty_cycle_until_settled,
         m.state_bound_violations,
         m.max_step_compute_ns as f64 / 1e3
     );

@@ -1008,6 +1008,7 @@ mod tests {
                 final_position_error_m: 0.0,
                 max_abs_u: 0.0,
                 duty_cycle: 1.0,
+                duty_cycle_until_settled: 1.0,
                 state_bound_violations: 0,
                 max_step_compute_ns: 0,
             },

@@ -23,6 +23,10 @@ pub struct Metrics {
     pub max_abs_u: f64,
     /// Fraction of the run time spent actuating (weighted by row durations).
     pub duty_cycle: f64,
+    /// The same fraction from the start until `settle_time_s` (the whole run
+    /// when it never settles): the part of the run the switching rule
+    /// shapes, before the terminal hold.
+    pub duty_cycle_until_settled: f64,
     /// Rows with some |x_i - target_i| > position bound or |v_i| > speed bound.
     pub state_bound_violations: usize,
     /// Longest controller computation for one step, ns (measured by the caller).
@@ -36,6 +40,23 @@ fn in_settle_band(x: &[f64], target: &[f64]) -> bool {
         .all(|(xv, tv)| {
             (xv[0] - tv[0]).abs() <= SETTLE_POSITION_TOL_M && xv[1].abs() < SETTLE_SPEED_TOL_M_PER_S
         })
+}
+
+/// Actuation time over total time for the rows that start before `end_s`.
+fn duty_cycle_until(records: &[Record], end_s: f64) -> f64 {
+    let (mut actuate_s, mut total_s) = (0.0, 0.0);
+    for pair in records.windows(2).filter(|p| p[0].t_s < end_s) {
+        let dt_s = pair[1].t_s - pair[0].t_s;
+        total_s += dt_s;
+        if pair[0].phase == Phase::Actuate {
+            actuate_s += dt_s;
+        }
+    }
+    if total_s > 0.0 {
+        actuate_s / total_s
+    } else {
+        0.0
+    }
 }
 
 impl Metrics {
@@ -83,19 +104,9 @@ impl Metrics {
             .map(|r| r.u_t_per_m.abs())
             .fold(0.0, f64::max);
 
-        let (mut actuate_s, mut total_s) = (0.0, 0.0);
-        for pair in records.windows(2) {
-            let dt_s = pair[1].t_s - pair[0].t_s;
-            total_s += dt_s;
-            if pair[0].phase == Phase::Actuate {
-                actuate_s += dt_s;
-            }
-        }
-        let duty_cycle = if total_s > 0.0 {
-            actuate_s / total_s
-        } else {
-            0.0
-        };
+        let duty_cycle = duty_cycle_until(records, f64::INFINITY);
+        let duty_cycle_until_settled =
+            duty_cycle_until(records, settle_time_s.unwrap_or(f64::INFINITY));
 
         let state_bound_violations = records
             .iter()
@@ -114,6 +125,7 @@ impl Metrics {
             final_position_error_m,
             max_abs_u,
             duty_cycle,
+            duty_cycle_until_settled,
             state_bound_violations,
             max_step_compute_ns,
         })

@@ -412,7 +412,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         if self.settings.sampling == Sampling::Variable {
             // Plan the next phase one sample longer than this one: the
             // rule may extend it, and the model stays close to what plays.
-            self.planned_phase_samples = (n + 1).min(self.settings.max_actuation_samples);
+            self.planned_phase_samples = n;
             self.update_schedule();
         }
         out
@@ -451,7 +451,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             mean_v += e[2 * i + 1] / m as f64;
             mean_g += gradient_gain::<S, NX, K>(i) / m as f64;
         }
-        if !(mean_g > 0.0) {
+        if mean_g.is_nan() || mean_g <= 0.0 {
             return 0.0;
         }
         let w = HOLD_NATURAL_FREQUENCY_RAD_PER_S;
@@ -598,7 +598,7 @@ fn check_settings(s: &ControllerSettings, n: usize) -> Result<(), RuntimeError> 
     if s.max_actuation_samples == 0 || s.max_actuation_samples > n {
         return Err(RuntimeError::BadSetting("max_actuation_samples"));
     }
-    let tolerance = |v: f64| v.is_finite() && v >= 0.0 && v <= MAX_ABS_POSITION_M;
+    let tolerance = |v: f64| (0.0..=MAX_ABS_POSITION_M).contains(&v);
     if !tolerance(s.hold_enter_position_m) {
         return Err(RuntimeError::BadSetting("hold_enter_position_m"));
     }
