@@ -214,12 +214,13 @@ mod tests {
             "final_position_error_m",
             "max_abs_u",
             "duty_cycle",
+            "duty_cycle_until_settled",
             "state_bound_violations",
             "max_step_compute_ns",
         ] {
             assert!(keys.contains(&k), "{k}");
         }
-        assert_eq!(keys.len(), 6);
+        assert_eq!(keys.len(), 7);
     }
 
     #[test]

@@ -96,3 +96,38 @@ fn all_figures_rejects_a_non_positive_duration() {
     assert!(all_figures(dir.path(), 0.0).is_err());
     assert!(all_figures(dir.path(), f64::NAN).is_err());
 }
+
+/// The README shows the committed figures in `docs/figures/`: their numbers
+/// must be what the current code produces (regenerate with
+/// `capsule-mpc figures --out docs/figures` when the controller changes).
+#[test]
+fn committed_figures_match_the_current_code() {
+    let committed: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/figures/figures.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let duration_s = committed["duration_s"].as_f64().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let fresh = all_figures(&dir.path().join("figures"), duration_s).unwrap();
+    let figures = committed["figures"].as_array().unwrap();
+    assert_eq!(figures.len(), fresh.len());
+    for (old, new) in figures.iter().zip(&fresh) {
+        assert_eq!(old["name"], new.name.as_str());
+        assert_eq!(old["caption"], new.caption.as_str(), "{}", new.name);
+        let runs = old["runs"].as_array().unwrap();
+        assert_eq!(runs.len(), new.runs.len(), "{}", new.name);
+        for (o, n) in runs.iter().zip(&new.runs) {
+            let stale = format!(
+                "{}: committed figure is stale; run `capsule-mpc figures --out docs/figures`",
+                new.name
+            );
+            assert_eq!(o["settle_time_s"].as_f64(), n.settle_time_s, "{stale}");
+            assert_eq!(o["duty_cycle"].as_f64(), Some(n.duty_cycle), "{stale}");
+            let err = o["final_position_error_m"].as_f64().unwrap();
+            assert!((err - n.final_position_error_m).abs() <= 1e-9, "{stale}");
+        }
+    }
+}
