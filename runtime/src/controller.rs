@@ -60,10 +60,10 @@ pub struct ControllerSettings {
     pub hold_release_speed_m_per_s: f64,
 }
 
-/// Default hold entry: half the 1 mm settle tolerance, m.
-pub const HOLD_ENTER_POSITION_M: f64 = 0.5e-3;
-/// Default hold entry speed: half the 5 mm/s settle tolerance, m/s.
-pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 2.5e-3;
+/// Default hold entry: 0.7 of the 1 mm settle tolerance, m.
+pub const HOLD_ENTER_POSITION_M: f64 = 0.7e-3;
+/// Default hold entry speed: 0.8 of the 5 mm/s settle tolerance, m/s.
+pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 4.0e-3;
 /// Default hold release: 0.8 of the settle tolerance, m (hysteresis keeps
 /// estimate noise from toggling the mode).
 pub const HOLD_RELEASE_POSITION_M: f64 = 1.0e-3;
