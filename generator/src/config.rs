@@ -278,15 +278,40 @@ fn check_range(
     Ok(())
 }
 
+/// ` (line L: `key = value`)` for the line holding byte `at` of `text`:
+/// trimmed, control characters blanked, at most 80 characters.
+fn source_line(text: &str, at: usize) -> String {
+    let bytes = text.as_bytes();
+    let at = at.min(bytes.len());
+    let start = bytes[..at]
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .map_or(0, |i| i + 1);
+    let end = bytes[at..]
+        .iter()
+        .position(|&b| b == b'\n')
+        .map_or(bytes.len(), |i| at + i);
+    let number = 1 + bytes[..start].iter().filter(|&&b| b == b'\n').count();
+    let line: String = String::from_utf8_lossy(&bytes[start..end])
+        .trim()
+        .chars()
+        .take(80)
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect();
+    format!(" (line {number}: `{line}`)")
+}
+
 impl Config {
     /// Parses and validates TOML text.
     pub fn from_toml_str(text: &str) -> Result<Config, ConfigError> {
         let config: Config = toml::from_str(text).map_err(|e| {
-            // toml's message already names the key; keep it on one line.
+            // toml's message names unknown, missing and duplicate keys, but
+            // not the key of a value of the wrong type or of an unreadable
+            // number: quote the line, which does. Keep it on one line.
             ConfigError::Parse(
                 e.message().replace('\n', " ").trim().to_string()
                     + &e.span()
-                        .map(|s| format!(" (at byte {})", s.start))
+                        .map(|s| source_line(text, s.start))
                         .unwrap_or_default(),
             )
         })?;
@@ -550,6 +575,20 @@ mod tests {
     fn unknown_field_is_named() {
         let e = with(|t| t.replacen("[fluid]", "[fluid]\ntemperature_k = 310.0", 1)).unwrap_err();
         assert!(e.to_string().contains("temperature_k"), "{e}");
+    }
+
+    #[test]
+    fn wrong_type_and_unreadable_number_name_the_key() {
+        for (from, to) in [
+            ("sphere_radius_m = 0.0015", "sphere_radius_m = \"abc\""),
+            ("horizon_steps = 10", "horizon_steps = -3"),
+            ("position_bound_m = 0.1", "position_bound_m = 1e400"),
+            ("preset = \"default\"", "preset = 3"),
+        ] {
+            let e = with(|t| t.replacen(from, to, 1)).unwrap_err().to_string();
+            assert!(e.contains(to), "{e}");
+            assert!(!e.contains('\n'), "{e}");
+        }
     }
 
     #[test]
