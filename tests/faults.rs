@@ -205,14 +205,15 @@ fn state_outside_the_tables_falls_back_to_braking() {
     // g_i (m/s^2 per T/m) from the config: the braking law's gain.
     let g_mean = spec::G.iter().sum::<f64>() / M as f64;
     let cases: [(&str, [f64; NX], Option<f64>); 5] = [
-        // Speeds far outside the index (|v| <= 0.45 m/s): saturated braking.
-        ("+2 m/s", [A[0], 2.0, A[2], 2.0], Some(-U_MAX)),
-        ("-5 m/s", [A[0], -5.0, A[2], -5.0], Some(U_MAX)),
+        // Speeds far outside the index (|v| <= 0.45 m/s), still physical
+        // (<= MAX_ABS_SPEED_M_PER_S): saturated braking.
+        ("+0.9 m/s", [A[0], 0.9, A[2], 0.9], Some(-U_MAX)),
+        ("-1 m/s", [A[0], -1.0, A[2], -1.0], Some(U_MAX)),
         // One capsule just outside the index, mean speed small: unsaturated.
         ("0.46 / -0.44 m/s", [A[0], 0.46, A[2], -0.44], None),
         // Positions far outside, at rest: nothing to brake.
         ("30 cm off, at rest", [0.3, 0.0, -0.3, 0.0], Some(0.0)),
-        ("1e6 m off", [1e6, 0.1, 1e6, 0.1], None),
+        ("90 cm off, moving", [0.9, 0.1, -0.9, 0.2], None),
     ];
     for (what, x, exact) in cases {
         let mut c = controller(Sampling::Ideal, &A);
@@ -259,6 +260,42 @@ fn state_outside_the_tables_falls_back_to_braking() {
         braking_gradient::<Solver, NX, K>(out.estimate[..NX].try_into().unwrap())
     );
     assert!(out.gradients_t_per_m[1..].iter().all(|&v| v == 0.0));
+}
+
+/// A full state beyond the physical range (|x| > 1 m or |v| > 1 m/s) is
+/// rejected like an implausible frame: status MeasurementRejected, the
+/// estimate kept (and planned from), a safe plan. Before the fix, such a
+/// state was stored in the estimator, whose next prediction overflowed to
+/// NaN: every later frame was rejected and the estimate stayed NaN
+/// (found by the `runtime` fuzz target, fuzz/regressions/runtime/).
+#[test]
+fn implausible_full_state_is_rejected_and_the_estimate_kept() {
+    let implausible: [(&str, [f64; NX]); 4] = [
+        ("5 m/s", [A[0], 5.0, A[2], 5.0]),
+        ("1e300 m/s", [0.0, 1e300, 0.0, 0.0]),
+        ("2 m away", [2.0, 0.0, 0.0, 0.0]),
+        ("1e300 m away", [0.0, 0.0, -1e300, 0.0]),
+    ];
+    for (what, bad) in implausible {
+        let mut c = controller(Sampling::Ideal, &A);
+        let good = [0.001, 0.05, 0.002, 0.06];
+        assert_eq!(c.cycle_full_state(&good).unwrap().status, RuntimeStatus::Ok);
+        let mut twin = c.clone();
+        let out = c.cycle_full_state(&bad).unwrap();
+        assert_eq!(out.status, RuntimeStatus::MeasurementRejected, "{what}");
+        assert_safe(&out, what);
+        assert_eq!(c.estimate(), good, "{what}: estimate kept");
+        assert_eq!(&out.estimate[..NX], &good[..], "{what}: planned from it");
+        // The same plan as the kept state fed again would give.
+        let again = twin.cycle_full_state(&good).unwrap();
+        assert_eq!(out.gradients_t_per_m, again.gradients_t_per_m, "{what}");
+        // Measured cycles afterwards keep a finite estimate and accept frames.
+        for _ in 0..5 {
+            let out = c.cycle(Some(&expected_frame(&c))).unwrap();
+            assert_eq!(out.status, RuntimeStatus::Ok, "{what}");
+            assert_safe(&out, what);
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------
@@ -684,8 +721,12 @@ fn every_output_respects_u_max() {
                     }
                     let out = if k == 70 && sampling == Sampling::Ideal {
                         // A state jump outside the tables (the plant's next
-                        // state is fed again afterwards).
-                        l.ctl.cycle_full_state(&[0.1, 0.9, -0.1, 0.8]).unwrap()
+                        // state is fed again afterwards), then an
+                        // implausible one.
+                        let out = l.ctl.cycle_full_state(&[0.1, 0.9, -0.1, 0.8]).unwrap();
+                        assert_safe(&out, "state jump");
+                        statuses.insert(format!("{:?}", out.status));
+                        l.ctl.cycle_full_state(&[0.1, 9.0, -0.1, 0.8]).unwrap()
                     } else if k % 7 == 3 {
                         l.cycle_with(Frame::Replaced([f64::NAN, 0.01]))
                     } else if k % 11 == 5 {

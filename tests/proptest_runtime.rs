@@ -11,7 +11,8 @@ use capsule_mpc::plant::{DisturbanceLevel, Phase, Plant};
 use capsule_mpc_generator::config::{Config, ConfigError, DEFAULT_CONFIG_TOML};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{
-    braking_gradient, ControllerSettings, Sampling, SwitchingRule,
+    braking_gradient, ControllerSettings, Sampling, SwitchingRule, MAX_ABS_POSITION_M,
+    MAX_ABS_SPEED_M_PER_S,
 };
 use capsule_mpc_runtime::generated::controller::solver::Solver;
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
@@ -199,9 +200,11 @@ proptest! {
     #![proptest_config(cases(1024))]
 
     /// Random full states in and far outside the tables (relative
-    /// positions up to 30 cm, speeds up to 3 m/s) from a fresh plan: Ok, IterationLimit or Fallback,
-    /// and a Fallback output is the braking law alone (never a table
-    /// value). Then a few more cycles from the plan's predicted states.
+    /// positions up to 30 cm, speeds up to 3 m/s) from a fresh plan: Ok,
+    /// IterationLimit or Fallback, and a Fallback output is the braking law
+    /// alone (never a table value); a state beyond the physical range is
+    /// rejected with the estimate kept. Then a few more cycles from the
+    /// plan's predicted states.
     #[test]
     fn full_states_anywhere_give_bounded_plans(
         target in [-0.04..=0.04f64, -0.04..=0.04f64],
@@ -215,8 +218,17 @@ proptest! {
         prop_assume!(ctl.set_target(&t).is_ok());
         let mut x: [f64; NX] = core::array::from_fn(|j| t[j] + e[j]);
         for _ in 0..steps {
+            let before = ctl.estimate();
             let out = ctl.cycle_full_state(&x).unwrap();
             check_output(&out, &s)?;
+            let physical = (0..M).all(|i| {
+                x[2 * i].abs() <= MAX_ABS_POSITION_M && x[2 * i + 1].abs() <= MAX_ABS_SPEED_M_PER_S
+            });
+            if !physical {
+                prop_assert_eq!(out.status, RuntimeStatus::MeasurementRejected);
+                prop_assert_eq!(ctl.estimate(), before);
+                return Ok(());
+            }
             match out.status {
                 RuntimeStatus::Ok | RuntimeStatus::IterationLimit => {}
                 RuntimeStatus::Fallback => {
@@ -337,7 +349,8 @@ proptest! {
     /// values (NaN, infinities, huge, out of range): construction either
     /// succeeds or names the bad setting; every call returns Ok or one of
     /// the documented errors naming its argument; every output is finite,
-    /// within u_max and plays 1..=N samples. Never a panic.
+    /// within u_max and plays 1..=N samples; the estimate stays finite.
+    /// Never a panic.
     #[test]
     fn arbitrary_calls_never_panic_and_stay_bounded(
         settings in settings_case(),
@@ -391,6 +404,12 @@ proptest! {
                     Err(e) => prop_assert_eq!(e, RuntimeError::NonFinite("positions_m")),
                 },
             }
+            prop_assert!(
+                ctl.estimate().iter().all(|v| v.is_finite()),
+                "estimate {:?} after {:?}",
+                ctl.estimate(),
+                op
+            );
         }
     }
 }

@@ -81,6 +81,11 @@ pub const HOLD_MAX_GRADIENT_FRACTION: f64 = 0.25;
 pub const MEASUREMENT_GATE_NIS: f64 = 100.0;
 /// Positions farther than this from the origin are not physical, m.
 pub const MAX_ABS_POSITION_M: f64 = 1.0;
+/// Speeds above this are not physical, m/s (terminal speeds at u_max: 0.23
+/// and 0.64 m/s for the default capsules). The estimator's model is not
+/// integrated there: its RK4 prediction overflows to NaN from about 2 m/s,
+/// and a NaN estimate would reject every later frame.
+pub const MAX_ABS_SPEED_M_PER_S: f64 = 1.0;
 /// Floor on the estimator's process noise (acceleration PSD, (m/s^2)^2 s):
 /// model error is never exactly zero.
 pub const MIN_ACCEL_PSD: f64 = 1.0e-6;
@@ -285,9 +290,20 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     /// Ideal sampling: the full state `x` is known now; plan one sample.
+    /// A state beyond the physical range (`MAX_ABS_POSITION_M`,
+    /// `MAX_ABS_SPEED_M_PER_S`) is rejected like an implausible frame: the
+    /// estimate is kept and planned from, status `MeasurementRejected`.
     pub fn cycle_full_state(&mut self, x: &[f64; NX]) -> Result<CycleOutput<K>, RuntimeError> {
         if x.iter().any(|v| !v.is_finite()) {
             return Err(RuntimeError::NonFinite("x"));
+        }
+        let physical = (0..NX / 2).all(|i| {
+            libm::fabs(x[2 * i]) <= MAX_ABS_POSITION_M
+                && libm::fabs(x[2 * i + 1]) <= MAX_ABS_SPEED_M_PER_S
+        });
+        if !physical {
+            let kept = self.estimate();
+            return Ok(self.plan_from(&kept, RuntimeStatus::MeasurementRejected, 1));
         }
         for i in 0..NX / 2 {
             self.filters[i].mean = [x[2 * i], x[2 * i + 1]];
