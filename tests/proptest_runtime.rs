@@ -177,7 +177,7 @@ fn run_loop(case: &LoopCase) -> Result<Option<()>, TestCaseError> {
 }
 
 proptest! {
-    #![proptest_config(cases(512))]
+    #![proptest_config(cases(1024))]
 
     /// Random start states, covered targets, disturbances, noise seeds and
     /// settings (sampling, switching, delay, actuation cap, lost frames) in
@@ -197,7 +197,7 @@ fn relative(inside: f64, outside: f64) -> impl Strategy<Value = f64> {
 }
 
 proptest! {
-    #![proptest_config(cases(1024))]
+    #![proptest_config(cases(2048))]
 
     /// Random full states in and far outside the tables (relative
     /// positions up to 30 cm, speeds up to 3 m/s) from a fresh plan: Ok,
@@ -343,7 +343,7 @@ impl SettingsCase {
 }
 
 proptest! {
-    #![proptest_config(cases(1024))]
+    #![proptest_config(cases(2048))]
 
     /// Arbitrary settings and an arbitrary sequence of calls with wild
     /// values (NaN, infinities, huge, out of range): construction either
@@ -552,7 +552,7 @@ fn check_config_error(e: &ConfigError, names: &[String]) -> Result<(), TestCaseE
 }
 
 proptest! {
-    #![proptest_config(cases(1024))]
+    #![proptest_config(cases(2048))]
 
     /// A single value replaced by anything: parse + validate never panics;
     /// the config is accepted, or the error names the field (the replaced
