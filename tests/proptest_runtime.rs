@@ -12,7 +12,7 @@ use capsule_mpc_generator::config::{Config, ConfigError, DEFAULT_CONFIG_TOML};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{
     braking_gradient, ControllerSettings, Sampling, SwitchingRule, MAX_ABS_POSITION_M,
-    MAX_ABS_SPEED_M_PER_S,
+    MAX_ABS_SPEED_M_PER_S, SETTING_NAMES,
 };
 use capsule_mpc_runtime::generated::controller::solver::Solver;
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
@@ -283,18 +283,6 @@ fn op() -> impl Strategy<Value = Op> {
         1 => [wild_f64(0.06), wild_f64(0.06)].prop_map(Op::Reset),
     ]
 }
-
-const SETTING_NAMES: [&str; 9] = [
-    "tracking_time_s",
-    "extra_delay_s",
-    "position_noise_m",
-    "disturbance_bound",
-    "max_actuation_samples",
-    "hold_enter_position_m",
-    "hold_enter_speed_m_per_s",
-    "hold_release_position_m",
-    "hold_release_speed_m_per_s",
-];
 
 /// Random settings: mostly in range, sometimes not.
 #[derive(Debug, Clone)]

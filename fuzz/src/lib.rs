@@ -21,7 +21,7 @@
 use capsule_mpc_capi as capi;
 use capsule_mpc_generator::config::{Config, ConfigError};
 use capsule_mpc_generator::model::Model;
-use capsule_mpc_runtime::controller::{Sampling, SwitchingRule};
+use capsule_mpc_runtime::controller::{Sampling, SwitchingRule, SETTING_NAMES};
 use capsule_mpc_runtime::generated::PlanSolver;
 use capsule_mpc_runtime::{
     Controller, DefaultController, PaperController, RuntimeError, RuntimeStatus,
@@ -492,18 +492,6 @@ pub fn runtime(data: &[u8]) {
         >(&mut inp, DefaultController::default_settings());
     }
 }
-
-const SETTING_NAMES: [&str; 9] = [
-    "tracking_time_s",
-    "extra_delay_s",
-    "position_noise_m",
-    "disturbance_bound",
-    "max_actuation_samples",
-    "hold_enter_position_m",
-    "hold_enter_speed_m_per_s",
-    "hold_release_position_m",
-    "hold_release_speed_m_per_s",
-];
 
 fn run_controller<S: PlanSolver<NX2, K>, const NX2: usize, const K: usize>(
     inp: &mut Input,

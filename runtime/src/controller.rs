@@ -153,6 +153,9 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     holding: bool,
     /// Samples per actuation phase the plan is refined for.
     planned_phase_samples: usize,
+    /// Mean acceleration per unit gradient near rest, (m/s^2)/(T/m): fixed
+    /// by the model, computed once for the hold law.
+    mean_gain: f64,
 }
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
@@ -188,6 +191,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             last_cost: f64::INFINITY,
             holding: false,
             planned_phase_samples: settings.max_actuation_samples,
+            mean_gain: mean_gradient_gain::<S, NX, K>(),
         };
         c.reset(positions_m)?;
         Ok(c)
@@ -460,13 +464,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// one mode a single gradient controls near rest), scaled by the duty
     /// of the schedule and bounded by a fraction of u_max.
     fn hold_gradient(&self, e: &[f64; NX]) -> f64 {
-        let m = NX / 2;
-        let (mut mean_x, mut mean_v, mut mean_g) = (0.0, 0.0, 0.0);
-        for i in 0..m {
-            mean_x += e[2 * i] / m as f64;
-            mean_v += e[2 * i + 1] / m as f64;
-            mean_g += gradient_gain::<S, NX, K>(i) / m as f64;
-        }
+        let (mean_x, mean_v) = capsule_means(e);
+        let mean_g = self.mean_gain;
         if mean_g.is_nan() || mean_g <= 0.0 {
             return 0.0;
         }
@@ -559,13 +558,8 @@ fn single<const K: usize>(u: f64) -> [f64; K] {
 pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     x: &[f64; NX],
 ) -> f64 {
-    let m = NX / 2;
-    let mut mean_v = 0.0;
-    let mut mean_g = 0.0;
-    for i in 0..m {
-        mean_v += x[2 * i + 1] / m as f64;
-        mean_g += gradient_gain::<S, NX, K>(i) / m as f64;
-    }
+    let (_, mean_v) = capsule_means(x);
+    let mean_g = mean_gradient_gain::<S, NX, K>();
     if mean_g.is_nan() || mean_g <= 0.0 || !mean_v.is_finite() {
         return 0.0;
     }
@@ -577,25 +571,51 @@ pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
 /// motion, extrapolated over [`HOLD_DRIFT_HORIZON_S`], keeps every capsule
 /// within `position_m` of the mean-corrected target.
 fn relative_drift_within<const NX: usize>(e: &[f64; NX], position_m: f64) -> bool {
-    let m = NX / 2;
-    let (mut mean_x, mut mean_v) = (0.0, 0.0);
-    for i in 0..m {
-        mean_x += e[2 * i] / m as f64;
-        mean_v += e[2 * i + 1] / m as f64;
-    }
-    (0..m).all(|i| {
+    let (mean_x, mean_v) = capsule_means(e);
+    (0..NX / 2).all(|i| {
         let d = e[2 * i] - mean_x;
         let w = e[2 * i + 1] - mean_v;
         libm::fabs(d + w * HOLD_DRIFT_HORIZON_S) <= position_m
     })
 }
 
-/// Capsule `i`'s acceleration per unit gradient near rest, (m/s^2)/(T/m),
-/// from a one-sample prediction of the model (no second copy of g_i).
-fn gradient_gain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(i: usize) -> f64 {
-    let (next, _) = S::capsule_transition(i, [0.0, 0.0], 1.0e-3, S::DT_S);
-    next[1] / (1.0e-3 * S::DT_S)
+/// Mean position and mean speed over the capsules of `[x1, v1, x2, v2, ...]`.
+fn capsule_means<const NX: usize>(x: &[f64; NX]) -> (f64, f64) {
+    let m = NX / 2;
+    let (mut mean_x, mut mean_v) = (0.0, 0.0);
+    for i in 0..m {
+        mean_x += x[2 * i] / m as f64;
+        mean_v += x[2 * i + 1] / m as f64;
+    }
+    (mean_x, mean_v)
 }
+
+/// The capsules' mean acceleration per unit gradient near rest,
+/// (m/s^2)/(T/m), from one-sample predictions of the model (no second copy
+/// of g_i).
+fn mean_gradient_gain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>() -> f64 {
+    let m = NX / 2;
+    let mut mean_g = 0.0;
+    for i in 0..m {
+        let (next, _) = S::capsule_transition(i, [0.0, 0.0], 1.0e-3, S::DT_S);
+        mean_g += next[1] / (1.0e-3 * S::DT_S) / m as f64;
+    }
+    mean_g
+}
+
+/// Every name `RuntimeError::BadSetting` can carry (the settings that are
+/// range-checked), for hosts and tests that map errors back to fields.
+pub const SETTING_NAMES: [&str; 9] = [
+    "tracking_time_s",
+    "extra_delay_s",
+    "position_noise_m",
+    "disturbance_bound",
+    "max_actuation_samples",
+    "hold_enter_position_m",
+    "hold_enter_speed_m_per_s",
+    "hold_release_position_m",
+    "hold_release_speed_m_per_s",
+];
 
 fn check_settings(s: &ControllerSettings, n: usize) -> Result<(), RuntimeError> {
     let finite_nonneg = |v: f64| v.is_finite() && v >= 0.0;
