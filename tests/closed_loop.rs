@@ -163,7 +163,7 @@ fn paper_switching_rule_is_too_conservative_to_extend() {
 /// With a 30 ms compute/transfer delay, predicting through tracking + delay
 /// beats solving from the stale measurement (the paper's way): measured
 /// over seeds 1-3, compensated settles in 3.8-4.7 s, uncompensated settles
-/// once (5.7 s) and misses twice.
+/// once (5.5 s) and misses twice.
 #[test]
 fn delay_compensation_is_measurably_better() {
     let (mut settled_comp, mut settled_raw) = (0, 0);
