@@ -60,8 +60,9 @@ pub struct Schedule {
     coast_h_s: f64,
 }
 
-/// Longest coast a schedule models after a phase, s.
-pub const MAX_COAST_S: f64 = 1.0;
+/// Longest coast a schedule models after a phase, s: the runtime accepts
+/// tracking and extra delay of up to 1 s each.
+pub const MAX_COAST_S: f64 = 2.0;
 
 impl Schedule {
     pub const BACK_TO_BACK: Schedule = Schedule {
