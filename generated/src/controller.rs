@@ -19845,18 +19845,32 @@ pub mod solver {
                 qp_iterations: 0,
                 max_qp_iterations: 0,
             };
+            let mut fresh = false;
             let mut cost = if self.has_plan {
-                rollout_cost(e, &self.plan, &self.schedule)
+                fresh = true;
+                rollout_with_jacobians(
+                    e,
+                    &self.plan,
+                    &self.schedule,
+                    &mut self.states,
+                    &mut self.jac,
+                )
             } else {
                 f64::INFINITY
             };
             if USE_TABLES {
                 match lookup_tail(e, &mut self.candidate) {
                     Some(()) => {
-                        let c = rollout_cost(e, &self.candidate, &self.schedule);
+                        let c = rollout_cost_below(
+                            e,
+                            &self.candidate,
+                            &self.schedule,
+                            cost,
+                        );
                         if c < cost {
                             self.plan = self.candidate;
                             cost = c;
+                            fresh = false;
                             report.took_table_plan = true;
                         }
                     }
@@ -19871,7 +19885,17 @@ pub mod solver {
             self.has_plan = true;
             let mut it = 0;
             while it < SQP_ITERATIONS {
+                if !fresh {
+                    rollout_with_jacobians(
+                        e,
+                        &self.plan,
+                        &self.schedule,
+                        &mut self.states,
+                        &mut self.jac,
+                    );
+                }
                 let (new_cost, qp_iters, converged) = self.sqp_iteration(e, cost);
+                fresh = !(new_cost < cost);
                 cost = new_cost;
                 report.qp_iterations += qp_iters;
                 if qp_iters > report.max_qp_iterations {
@@ -19885,15 +19909,9 @@ pub mod solver {
             report.cost = cost;
             report
         }
-        /// One SQP iteration; returns (cost after, QP iterations, QP converged).
+        /// One SQP iteration from the rolled-out `states` and `jac` of `plan`;
+        /// returns (cost after, QP iterations, QP converged).
         fn sqp_iteration(&mut self, e: &[f64; NX], cost: f64) -> (f64, u32, bool) {
-            rollout_with_jacobians(
-                e,
-                &self.plan,
-                &self.schedule,
-                &mut self.states,
-                &mut self.jac,
-            );
             self.tail_cost_to_go();
             self.window_sensitivities();
             self.condense();
@@ -19907,7 +19925,7 @@ pub mod solver {
                     self.candidate[j] = clamp_u(self.plan[j] + step * self.qp.x[j]);
                     j += 1;
                 }
-                let c = rollout_cost(e, &self.candidate, &self.schedule);
+                let c = rollout_cost_below(e, &self.candidate, &self.schedule, cost);
                 if c < cost {
                     self.plan = self.candidate;
                     return (c, iters, converged);
@@ -20072,6 +20090,7 @@ pub mod solver {
         }
         /// Returns (iterations, converged). On the iteration bound, `x` is the
         /// last feasible iterate (always within the box).
+        ///
         pub fn solve(&mut self) -> (u32, bool) {
             self.x = [0.0; N];
             self.active = [0; N];
@@ -20274,7 +20293,7 @@ pub mod solver {
         Some(())
     }
     /// One RK4 step of capsule `i` with forward sensitivities over `h` seconds.
-    #[inline]
+    #[inline(always)]
     fn rk4_capsule(
         i: usize,
         x: f64,
@@ -20315,7 +20334,7 @@ pub mod solver {
         (next, a, b)
     }
     /// 2x2 product p q (row major): chains sub-step Jacobians.
-    #[inline]
+    #[inline(always)]
     fn mat2_mul(p: &[f64; 4], q: &[f64; 4]) -> [f64; 4] {
         [
             p[0] * q[0] + p[1] * q[2],
@@ -20324,30 +20343,46 @@ pub mod solver {
             p[2] * q[1] + p[3] * q[3],
         ]
     }
-    /// Plan sample `k` (RK4_SUBSTEPS sub-steps) of capsule `i` and the
-    /// schedule's coast after it, if any, with Jacobians.
-    #[inline]
-    fn sample_capsule(
-        i: usize,
-        x: f64,
-        v: f64,
+    /// Plan sample `k` (RK4_SUBSTEPS sub-steps) of every capsule and the
+    /// schedule's coast after it, if any; with `JAC`, also the sample's
+    /// per-capsule Jacobians into `jac`.
+    ///
+    /// Why all capsules at once: a rollout is latency-bound (each RK4 stage
+    /// waits on the last), and the capsules' chains are independent. Stepping
+    /// them side by side, sub-step by sub-step, lets the CPU overlap them. Per
+    /// capsule the arithmetic is unchanged, bit for bit.
+    #[inline(always)]
+    fn sample_all<const JAC: bool>(
+        e: &mut [f64; NX],
         u: f64,
         k: usize,
         schedule: &Schedule,
-    ) -> ([f64; 2], [f64; 4], [f64; 2]) {
+        jac: &mut StepJacobian,
+    ) {
         let h = DT_S / RK4_SUBSTEPS as f64;
-        let mut s = [x, v];
-        let mut a = [1.0, 0.0, 0.0, 1.0];
-        let mut b = [0.0, 0.0];
+        if JAC {
+            *jac = StepJacobian {
+                a: [[1.0, 0.0, 0.0, 1.0]; M],
+                b: [[0.0, 0.0]; M],
+            };
+        }
         let mut n = 0;
         while n < RK4_SUBSTEPS {
-            let (next, sa, sb) = rk4_capsule(i, s[0], s[1], u, h);
-            a = mat2_mul(&sa, &a);
-            b = [
-                sa[0] * b[0] + sa[1] * b[1] + sb[0],
-                sa[2] * b[0] + sa[3] * b[1] + sb[1],
-            ];
-            s = next;
+            let mut i = 0;
+            while i < M {
+                let (next, sa, sb) = rk4_capsule(i, e[2 * i], e[2 * i + 1], u, h);
+                if JAC {
+                    let b = jac.b[i];
+                    jac.a[i] = mat2_mul(&sa, &jac.a[i]);
+                    jac.b[i] = [
+                        sa[0] * b[0] + sa[1] * b[1] + sb[0],
+                        sa[2] * b[0] + sa[3] * b[1] + sb[1],
+                    ];
+                }
+                e[2 * i] = next[0];
+                e[2 * i + 1] = next[1];
+                i += 1;
+            }
             n += 1;
         }
         let coast_steps = if schedule.coasts_after(k) {
@@ -20357,13 +20392,29 @@ pub mod solver {
         };
         let mut n = 0;
         while n < coast_steps {
-            let (next, sa, _) = rk4_capsule(i, s[0], s[1], 0.0, schedule.coast_h_s);
-            a = mat2_mul(&sa, &a);
-            b = [sa[0] * b[0] + sa[1] * b[1], sa[2] * b[0] + sa[3] * b[1]];
-            s = next;
+            let mut i = 0;
+            while i < M {
+                let (next, sa, _) = rk4_capsule(
+                    i,
+                    e[2 * i],
+                    e[2 * i + 1],
+                    0.0,
+                    schedule.coast_h_s,
+                );
+                if JAC {
+                    let b = jac.b[i];
+                    jac.a[i] = mat2_mul(&sa, &jac.a[i]);
+                    jac.b[i] = [
+                        sa[0] * b[0] + sa[1] * b[1],
+                        sa[2] * b[0] + sa[3] * b[1],
+                    ];
+                }
+                e[2 * i] = next[0];
+                e[2 * i + 1] = next[1];
+                i += 1;
+            }
             n += 1;
         }
-        (s, a, b)
     }
     fn stage_cost(e: &[f64; NX], u: f64) -> f64 {
         let mut c = R * u * u;
@@ -20385,78 +20436,64 @@ pub mod solver {
     }
     /// Nonlinear cost of `plan` from `e0` over K samples (no Jacobians).
     pub fn rollout_cost(e0: &[f64; NX], plan: &[f64; K], schedule: &Schedule) -> f64 {
+        rollout_cost_below(e0, plan, schedule, f64::INFINITY)
+    }
+    /// Like [`rollout_cost`], but gives up with infinity as soon as the partial
+    /// cost reaches `bound`: every term is non-negative, so the total could no
+    /// longer come out below it. Rejected candidates then cost a fraction of a
+    /// rollout, and the accept decision `cost < bound` is unchanged.
+    pub fn rollout_cost_below(
+        e0: &[f64; NX],
+        plan: &[f64; K],
+        schedule: &Schedule,
+        bound: f64,
+    ) -> f64 {
         let mut e = *e0;
+        let mut unused = ZERO_JACOBIAN;
         let mut cost = 0.0;
         let mut k = 0;
         while k < K {
             cost += stage_cost(&e, plan[k]);
-            let mut i = 0;
-            while i < M {
-                let (next, _, _) = sample_capsule(
-                    i,
-                    e[2 * i],
-                    e[2 * i + 1],
-                    plan[k],
-                    k,
-                    schedule,
-                );
-                e[2 * i] = next[0];
-                e[2 * i + 1] = next[1];
-                i += 1;
+            if cost >= bound {
+                return f64::INFINITY;
             }
+            sample_all::<false>(&mut e, plan[k], k, schedule, &mut unused);
             k += 1;
         }
         let total = cost + terminal_cost(&e);
         if total.is_nan() { f64::INFINITY } else { total }
     }
+    /// Rolls `plan` out with per-sample Jacobians; returns its nonlinear cost
+    /// (the same sum, in the same order, as [`rollout_cost`]).
     fn rollout_with_jacobians(
         e0: &[f64; NX],
         plan: &[f64; K],
         schedule: &Schedule,
         states: &mut [[f64; NX]; K + 1],
         jac: &mut [StepJacobian; K],
-    ) {
+    ) -> f64 {
         states[0] = *e0;
+        let mut cost = 0.0;
         let mut k = 0;
         while k < K {
-            let mut i = 0;
-            while i < M {
-                let (next, a, b) = sample_capsule(
-                    i,
-                    states[k][2 * i],
-                    states[k][2 * i + 1],
-                    plan[k],
-                    k,
-                    schedule,
-                );
-                states[k + 1][2 * i] = next[0];
-                states[k + 1][2 * i + 1] = next[1];
-                jac[k].a[i] = a;
-                jac[k].b[i] = b;
-                i += 1;
-            }
+            cost += stage_cost(&states[k], plan[k]);
+            let mut e = states[k];
+            sample_all::<true>(&mut e, plan[k], k, schedule, &mut jac[k]);
+            states[k + 1] = e;
             k += 1;
         }
+        let total = cost + terminal_cost(&states[K]);
+        if total.is_nan() { f64::INFINITY } else { total }
     }
     /// Predicted relative state after applying `plan[..samples]` from `e0`.
     pub fn predict(e0: &[f64; NX], plan: &[f64; K], samples: usize) -> [f64; NX] {
         let mut e = *e0;
+        let mut unused = ZERO_JACOBIAN;
         let mut k = 0;
         while k < samples && k < K {
-            let mut i = 0;
-            while i < M {
-                let (next, _, _) = sample_capsule(
-                    i,
-                    e[2 * i],
-                    e[2 * i + 1],
-                    plan[k],
-                    k,
-                    &Schedule::BACK_TO_BACK,
-                );
-                e[2 * i] = next[0];
-                e[2 * i + 1] = next[1];
-                i += 1;
-            }
+            sample_all::<
+                false,
+            >(&mut e, plan[k], k, &Schedule::BACK_TO_BACK, &mut unused);
             k += 1;
         }
         e
