@@ -134,21 +134,43 @@ fn constant_sampling_settles_and_stays() {
     }
 }
 
-/// Variable sampling with the tight rule extends actuation far from the
-/// target: duty until settling >= 0.75 on average (measured 0.82 over seeds
-/// 1-8), every run settles and stays.
+/// Issue 4: variable sampling with the tight rule actuates at least 75 % of
+/// the time until settling and settles no later than constant sampling on
+/// the same scenarios and seeds (mean per scenario), and every run stays
+/// settled. Measured over seeds 1-8: A 1.21 s vs 1.78 s, C 1.57 s vs
+/// 1.86 s; duty until settled 0.85 on average, 0.74 at worst.
 #[test]
-fn variable_sampling_with_the_tight_rule_actuates_longer_and_settles() {
-    let runs = scanner_runs(Sampling::Variable, SwitchingRule::Tight, 1..=4);
+fn variable_sampling_with_the_tight_rule_actuates_longer_and_settles_sooner() {
+    let variable = scanner_runs(Sampling::Variable, SwitchingRule::Tight, 1..=4);
+    let constant = scanner_runs(Sampling::Constant, SwitchingRule::Tight, 1..=4);
     let mut duty_sum = 0.0;
-    for (name, m) in &runs {
-        assert!(m.settle_time_s.is_some_and(|t| t <= 3.0), "{name}: {m:?}");
+    for (name, m) in &variable {
+        assert!(m.settle_time_s.is_some_and(|t| t <= 2.5), "{name}: {m:?}");
         assert!(m.final_position_error_m <= 1e-3, "{name}: {m:?}");
         assert!(m.duty_cycle_until_settled >= 0.65, "{name}: {m:?}");
         duty_sum += m.duty_cycle_until_settled;
     }
-    let mean = duty_sum / runs.len() as f64;
+    let mean = duty_sum / variable.len() as f64;
     assert!(mean >= 0.75, "mean duty until settled {mean}");
+    // scanner_runs lists scenario A's seeds, then C's.
+    let per_scenario = variable.len() / 2;
+    let mean_settle = |runs: &[(String, capsule_mpc::metrics::Metrics)]| {
+        runs.iter()
+            .map(|(_, m)| m.settle_time_s.unwrap_or(f64::INFINITY))
+            .sum::<f64>()
+            / runs.len() as f64
+    };
+    for (s, name) in [(0, "A"), (1, "C")] {
+        let range = s * per_scenario..(s + 1) * per_scenario;
+        let (v, c) = (
+            mean_settle(&variable[range.clone()]),
+            mean_settle(&constant[range]),
+        );
+        assert!(
+            v <= c,
+            "scenario {name}: variable mean settle {v} s > constant {c} s"
+        );
+    }
 }
 
 /// Condition (17) with the paper's worst-case constants never allows more

@@ -503,7 +503,7 @@ fn target_change_mid_run_restarts_the_plan_and_converges() {
     for (sampling, switch_at_s, end_s, tolerance_m) in [
         (Sampling::Ideal, 0.4, 2.9, 0.5e-3),
         (Sampling::Constant, 0.8, 5.0, 1e-3),
-        (Sampling::Variable, 0.8, 5.0, 1e-3),
+        (Sampling::Variable, 0.4, 5.0, 1e-3),
     ] {
         let what = format!("{sampling:?}");
         let mut l = Loop::new(sampling, &A, DisturbanceLevel::Paper, 3);
