@@ -57,7 +57,7 @@ use capsule_mpc_generator::model::{rk4_capsule, CapsuleParams, Model};
 use capsule_mpc_generator::ocp::OcpWeights;
 use capsule_mpc_runtime::controller::Sampling as RtSampling;
 use capsule_mpc_runtime::generated::controller::{solver, spec, tables};
-use capsule_mpc_runtime::generated::{SolveReport, SolveStatus};
+use capsule_mpc_runtime::generated::{qp_iteration_map, SolveReport, SolveStatus};
 use capsule_mpc_runtime::DefaultController;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -161,6 +161,9 @@ pub struct StateTiming {
     pub solver_warm: u64,
     pub cold: SolveReport,
     pub warm: SolveReport,
+    /// The QP iteration map's entries for the cold and the warm state.
+    pub cold_map: u32,
+    pub warm_map: u32,
 }
 
 /// The warm case of one state, for the peers: the predicted next state, the
@@ -229,6 +232,8 @@ pub fn time_state(proto: &DefaultController, e: &[f64; NX]) -> StateTiming {
         solver_warm,
         cold,
         warm,
+        cold_map: solver::qp_iterations_measured(e),
+        warm_map: solver::qp_iterations_measured(&e1),
     }
 }
 
@@ -1035,8 +1040,16 @@ fn measure(
     let mut hist: BTreeMap<u32, u64> = BTreeMap::new();
     let mut max_iter = 0;
     let mut statuses: BTreeMap<&'static str, u64> = BTreeMap::new();
+    // Solves above their cell's offline-measured count (the runtime flags
+    // these), and solves in cells the map has no count for.
+    let (mut above_map, mut unmapped) = (0u64, 0u64);
     for t in &timings {
-        for r in [t.cold, t.warm] {
+        for (r, map) in [(t.cold, t.cold_map), (t.warm, t.warm_map)] {
+            if map == 0 {
+                unmapped += 1;
+            } else if r.max_qp_iterations > map {
+                above_map += 1;
+            }
             *hist.entry(r.max_qp_iterations).or_default() += 1;
             max_iter = max_iter.max(r.max_qp_iterations);
             let name = match r.status {
@@ -1115,6 +1128,11 @@ fn measure(
         );
     }
     println!("QP iterations (max per QP, per solve): max {max_iter}, histogram {hist:?}; statuses {statuses:?}");
+    println!(
+        "QP iteration map (offline, per index cell; largest entry {}): {above_map} of {} solves above their cell's count, {unmapped} in cells without one",
+        qp_iteration_map::CONTROLLER_MAX,
+        2 * timings.len()
+    );
     println!("worst states (by max of cold/warm controller step; re-timed medians show whether the max was noise):");
     for w in &worst {
         println!(
@@ -1148,6 +1166,12 @@ fn measure(
             "max": max_iter,
             "histogram": hist.iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
             "qp_max_iterations_bound": spec::QP_MAX_ITERATIONS,
+            "offline_map": {
+                "measured": qp_iteration_map::MEASURED,
+                "largest_cell_count": qp_iteration_map::CONTROLLER_MAX,
+                "solves_above_cell_count": above_map,
+                "solves_in_unmapped_cells": unmapped,
+            },
             "statuses": statuses,
         },
         "worst_states": worst,

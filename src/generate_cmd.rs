@@ -2,6 +2,7 @@
 //! that the committed crate is what the generator produces.
 
 use crate::cli::{load_config, GenerateArgs};
+use crate::qp_map;
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::generate::{differences, emit_all, generate, write_atomically};
 use capsule_mpc_generator::tables::{Progress, Tables};
@@ -44,7 +45,7 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
     let config = load_config(args.config.as_deref())?;
     let started = Instant::now();
     let bar = Bar(Mutex::new(None));
-    let files = if args.reuse_tables && !args.check {
+    let mut files = if args.reuse_tables && !args.check {
         let path = args.out.join("tables.bin");
         let tables = Tables::read(&path, &config).context("--reuse-tables")?;
         emit_all(&config, tables)?
@@ -52,6 +53,13 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         generate(&config, &bar)?
     };
     bar.finish();
+    if !qp_map::fill_if_compiled(&mut files)? {
+        eprintln!(
+            "note: the emitted solver differs from the one compiled into this binary, so its \
+             QP iteration map was left unmeasured; rebuild (`cargo build --release`) and run \
+             `capsule-mpc generate --reuse-tables` to measure it"
+        );
+    }
     let elapsed = started.elapsed().as_secs_f64();
     let t = &files.tables;
     let table_bytes = files

@@ -9,4 +9,5 @@ pub mod generate_cmd;
 pub mod inspect;
 pub mod metrics;
 pub mod plant;
+pub mod qp_map;
 pub mod report;

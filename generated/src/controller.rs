@@ -34,7 +34,6 @@ pub mod spec {
     /// Active-set iterations allowed per QP.
     pub const QP_MAX_ITERATIONS: usize = 30usize;
     /// Largest QP iteration count measured offline over the grid.
-    pub const QP_ITERATIONS_MEASURED_OFFLINE: usize = 0usize;
     /// Halvings tried in the line search.
     pub const LINE_SEARCH_TRIES: usize = 4;
     /// Multipliers below this count as zero in the active-set QP.
@@ -19675,6 +19674,9 @@ pub mod tables {
         17760257u32, 17760257u32, 17760256u32, 17760256u32, 17760256u32, 17760256u32,
         17760256u32, 17760256u32, 17760256u32,
     ];
+    /// Per index cell: most QP iterations measured offline (empty
+    /// when not measured; see `qp_iteration_map.rs`).
+    pub static QP_ITERATION_MAP: &[u8] = crate::qp_iteration_map::CONTROLLER;
 }
 pub mod solver {
     //! Fixed-size online solver: refines a long plan with Gauss-Newton SQP steps
@@ -20269,9 +20271,8 @@ pub mod solver {
         }
         Some(libm::round(f) as usize)
     }
-    /// Fills `out` with the stored plan tail for relative state `e`; None when
-    /// `e` is outside the index or its cell has no plan.
-    pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
+    /// The warm-start index cell of relative state `e`; None outside the index.
+    pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
         let mut flat = 0usize;
         let mut j = 0;
         while j < NX {
@@ -20279,6 +20280,20 @@ pub mod solver {
             flat = flat * axis.count + axis_nearest(axis, e[j])?;
             j += 1;
         }
+        Some(flat)
+    }
+    /// Most QP iterations measured offline in the index cell of `e` (0: not
+    /// measured, or outside the index).
+    pub fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
+        match index_cell(e) {
+            Some(c) if c < QP_ITERATION_MAP.len() => QP_ITERATION_MAP[c] as u32,
+            _ => 0,
+        }
+    }
+    /// Fills `out` with the stored plan tail for relative state `e`; None when
+    /// `e` is outside the index or its cell has no plan.
+    pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
+        let flat = index_cell(e)?;
         let cell = INDEX[flat];
         let plan = (cell >> 16) as usize;
         let offset = (cell & 0xffff) as usize;
@@ -20544,7 +20559,6 @@ pub mod solver {
         const X_DIAMETER: f64 = X_DIAMETER;
         const SWITCHING_SIGMA: f64 = SWITCHING_SIGMA;
         const QP_MAX_ITERATIONS: usize = QP_MAX_ITERATIONS;
-        const QP_ITERATIONS_MEASURED_OFFLINE: usize = QP_ITERATIONS_MEASURED_OFFLINE;
         const TABLE_BYTES: usize = TABLE_BYTES;
         fn new() -> Self {
             Solver::new()
@@ -20563,6 +20577,9 @@ pub mod solver {
         }
         fn plan(&self) -> &[f64; K] {
             Solver::plan(self)
+        }
+        fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
+            qp_iterations_measured(e)
         }
         fn covers_from_rest(e: &[f64; NX]) -> bool {
             Solver::covers_from_rest(e)

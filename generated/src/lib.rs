@@ -21,6 +21,9 @@ pub mod controller;
 #[rustfmt::skip]
 #[allow(clippy::all)]
 pub mod paper_preset;
+#[rustfmt::skip]
+#[allow(clippy::all)]
+pub mod qp_iteration_map;
 
 /// Outcome of one solve (separate from errors: every status comes with a
 /// usable plan that respects |u| <= u_max).
@@ -74,9 +77,8 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     const L_V: f64;
     const X_DIAMETER: f64;
     const SWITCHING_SIGMA: f64;
-    /// QP iteration bound per solve and the offline-measured maximum.
+    /// QP iteration bound (hard cap per QP).
     const QP_MAX_ITERATIONS: usize;
-    const QP_ITERATIONS_MEASURED_OFFLINE: usize;
     /// Bytes of table data.
     const TABLE_BYTES: usize;
 
@@ -94,6 +96,10 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     fn plan(&self) -> &[f64; K];
     /// Whether a start at rest at relative positions `e` is covered.
     fn covers_from_rest(e: &[f64; NX]) -> bool;
+    /// Most active-set iterations one QP took in the offline solves in the
+    /// warm-start index cell of `e` (`capsule-mpc generate`); 0 when not
+    /// measured or outside the index.
+    fn qp_iterations_measured(e: &[f64; NX]) -> u32;
     /// Stage cost L(e, u) (per sample).
     fn stage_cost(e: &[f64; NX], u: f64) -> f64;
     /// State after applying `plan[..samples]` from `e`.

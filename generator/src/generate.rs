@@ -2,7 +2,7 @@
 //! `--check` comparison against what is committed.
 
 use crate::config::{Config, CostUnits, Preset};
-use crate::emit::{emit_lib, emit_module, EmitError, EmitInput};
+use crate::emit::{emit_lib, emit_module, emit_qp_iteration_map, EmitError, EmitInput};
 use crate::tables::{build_tables, config_hash, Progress, Tables};
 use std::path::{Path, PathBuf};
 
@@ -57,6 +57,31 @@ pub struct GeneratedFiles {
     pub tables: Tables,
 }
 
+/// Where the per-cell QP iteration map goes, relative to the crate.
+pub const QP_ITERATION_MAP_PATH: &str = "src/qp_iteration_map.rs";
+
+impl GeneratedFiles {
+    /// The bytes of `rel` (a path relative to the crate), if emitted.
+    pub fn file(&self, rel: &str) -> Option<&[u8]> {
+        self.files
+            .iter()
+            .find(|(p, _)| p == Path::new(rel))
+            .map(|(_, b)| b.as_slice())
+    }
+
+    /// Replaces the placeholder QP iteration map with a measured one.
+    pub fn set_qp_iteration_map(&mut self, controller: &[u8]) -> Result<(), GenerateError> {
+        let text = emit_qp_iteration_map(Some(controller))?;
+        for (p, bytes) in &mut self.files {
+            if p == Path::new(QP_ITERATION_MAP_PATH) {
+                *bytes = text.into_bytes();
+                return Ok(());
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Builds the tables and emits every file of the generated crate.
 pub fn generate(config: &Config, progress: &dyn Progress) -> Result<GeneratedFiles, GenerateError> {
     let tables = build_tables(config, progress);
@@ -69,14 +94,14 @@ pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, Gener
         config,
         tables: Some(&tables),
         config_hash: config_hash(config),
-        measured_qp_iterations: 0,
+        qp_map_ident: "CONTROLLER",
     })?;
     let paper = paper_preset(config);
     let paper_module = emit_module(&EmitInput {
         config: &paper,
         tables: None,
         config_hash: config_hash(&paper),
-        measured_qp_iterations: 0,
+        qp_map_ident: "PAPER_PRESET",
     })?;
     let files = vec![
         (
@@ -88,6 +113,10 @@ pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, Gener
         (
             PathBuf::from("src/paper_preset.rs"),
             paper_module.into_bytes(),
+        ),
+        (
+            PathBuf::from(QP_ITERATION_MAP_PATH),
+            emit_qp_iteration_map(None)?.into_bytes(),
         ),
         (PathBuf::from("tables.bin"), tables.to_bytes()),
     ];

@@ -614,9 +614,8 @@ fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
     Some(libm::round(f) as usize)
 }
 
-/// Fills `out` with the stored plan tail for relative state `e`; None when
-/// `e` is outside the index or its cell has no plan.
-pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
+/// The warm-start index cell of relative state `e`; None outside the index.
+pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
     let mut flat = 0usize;
     let mut j = 0;
     while j < NX {
@@ -628,6 +627,22 @@ pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
         flat = flat * axis.count + axis_nearest(axis, e[j])?;
         j += 1;
     }
+    Some(flat)
+}
+
+/// Most QP iterations measured offline in the index cell of `e` (0: not
+/// measured, or outside the index).
+pub fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
+    match index_cell(e) {
+        Some(c) if c < QP_ITERATION_MAP.len() => QP_ITERATION_MAP[c] as u32,
+        _ => 0,
+    }
+}
+
+/// Fills `out` with the stored plan tail for relative state `e`; None when
+/// `e` is outside the index or its cell has no plan.
+pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
+    let flat = index_cell(e)?;
     let cell = INDEX[flat];
     let plan = (cell >> 16) as usize;
     let offset = (cell & 0xffff) as usize;
@@ -884,7 +899,6 @@ impl PlanSolver<NX, K> for Solver {
     const X_DIAMETER: f64 = X_DIAMETER;
     const SWITCHING_SIGMA: f64 = SWITCHING_SIGMA;
     const QP_MAX_ITERATIONS: usize = QP_MAX_ITERATIONS;
-    const QP_ITERATIONS_MEASURED_OFFLINE: usize = QP_ITERATIONS_MEASURED_OFFLINE;
     const TABLE_BYTES: usize = TABLE_BYTES;
 
     fn new() -> Self {
@@ -904,6 +918,9 @@ impl PlanSolver<NX, K> for Solver {
     }
     fn plan(&self) -> &[f64; K] {
         Solver::plan(self)
+    }
+    fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
+        qp_iterations_measured(e)
     }
     fn covers_from_rest(e: &[f64; NX]) -> bool {
         Solver::covers_from_rest(e)

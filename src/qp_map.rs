@@ -1,0 +1,122 @@
+//! The per-cell QP iteration map: the most active-set iterations one QP
+//! takes in the solves run at every warm-start index cell, measured with
+//! the compiled solver and emitted as `generated/src/qp_iteration_map.rs`.
+//!
+//! Why measured, not derived: a primal active-set method has no useful
+//! a-priori iteration bound (the hard cap 3N only stops it). Solving at
+//! every cell, cold from the table and warm one sample later, under every
+//! schedule the runtime uses, gives the count the runtime can compare
+//! against: a solve above its cell's measured count is flagged, never
+//! silent. It is a measurement over cell centres, not a proof for every
+//! state inside a cell.
+
+use anyhow::Result;
+use capsule_mpc_generator::generate::GeneratedFiles;
+use capsule_mpc_runtime::generated::controller::{solver, spec, tables};
+use capsule_mpc_runtime::generated::SolveStatus;
+use rayon::prelude::*;
+
+/// The controller module this binary was compiled with.
+const COMPILED_CONTROLLER: &str = include_str!("../generated/src/controller.rs");
+
+/// Measures the map into `files` when their emitted solver is the one
+/// compiled into this binary (the map describes that solver); returns
+/// false, leaving the unmeasured placeholder, otherwise.
+pub fn fill_if_compiled(files: &mut GeneratedFiles) -> Result<bool> {
+    if files.file("src/controller.rs") != Some(COMPILED_CONTROLLER.as_bytes()) {
+        return Ok(false);
+    }
+    files.set_qp_iteration_map(&measure())?;
+    Ok(true)
+}
+
+/// The schedules the runtime sets: ideal (back to back), constant sampling
+/// (one sample per phase) and variable sampling at its longest phase, each
+/// with the config's tracking + delay as the coast.
+fn schedules() -> [(usize, f64); 3] {
+    let coast_s = spec::TRACKING_TIME_S + spec::EXTRA_DELAY_S;
+    [(spec::K, 0.0), (1, coast_s), (spec::N, coast_s)]
+}
+
+/// Centre of index cell `flat` (row-major over e1, v1, e2, v2, ...).
+pub fn cell_centre(mut flat: usize) -> [f64; spec::NX] {
+    let mut e = [0.0; spec::NX];
+    for j in (0..spec::NX).rev() {
+        let axis = if j % 2 == 0 {
+            tables::INDEX_POSITION_AXIS
+        } else {
+            tables::INDEX_SPEED_AXIS
+        };
+        e[j] = axis.start + (flat % axis.count) as f64 * axis.step;
+        flat /= axis.count;
+    }
+    e
+}
+
+/// Measures the map over every cell (both cores): per cell, the most
+/// iterations any QP took in a cold solve from its centre or in the warm
+/// solve one sample later (counted in the cell that state falls into).
+pub fn measure() -> Vec<u8> {
+    let cells = tables::INDEX.len();
+    let hits: Vec<Vec<(usize, u32)>> = (0..cells)
+        .into_par_iter()
+        .map(|c| {
+            let e = cell_centre(c);
+            let mut out = Vec::with_capacity(2 * schedules().len());
+            for (samples, coast_s) in schedules() {
+                let mut s = solver::Solver::new();
+                s.set_schedule(samples, coast_s);
+                let cold = s.solve(&e);
+                if cold.status == SolveStatus::OutOfRange {
+                    continue;
+                }
+                out.push((c, cold.max_qp_iterations));
+                let e1 = solver::predict(&e, s.plan(), 1);
+                s.shift(1);
+                let warm = s.solve(&e1);
+                if let Some(c1) = solver::index_cell(&e1) {
+                    out.push((c1, warm.max_qp_iterations));
+                }
+            }
+            out
+        })
+        .collect();
+    let mut map = vec![0u8; cells];
+    for (c, iters) in hits.into_iter().flatten() {
+        let v = u8::try_from(iters).unwrap_or(u8::MAX);
+        map[c] = map[c].max(v);
+    }
+    dilate(&map)
+}
+
+/// Each cell's count becomes the largest over the cell and its neighbours
+/// (+-1 along every axis): states inside a cell lie between its centre and
+/// its neighbours' centres, and the count varies from centre to centre.
+fn dilate(map: &[u8]) -> Vec<u8> {
+    let dims: Vec<usize> = (0..spec::NX)
+        .map(|j| {
+            if j % 2 == 0 {
+                tables::INDEX_POSITION_AXIS.count
+            } else {
+                tables::INDEX_SPEED_AXIS.count
+            }
+        })
+        .collect();
+    let mut out = map.to_vec();
+    // Separable: a max over +-1 along each axis in turn covers the 3^NX block.
+    let mut stride = 1;
+    for &n in dims.iter().rev() {
+        let src = out.clone();
+        for (c, v) in out.iter_mut().enumerate() {
+            let i = (c / stride) % n;
+            if i > 0 {
+                *v = (*v).max(src[c - stride]);
+            }
+            if i + 1 < n {
+                *v = (*v).max(src[c + stride]);
+            }
+        }
+        stride *= n;
+    }
+    out
+}
