@@ -4,7 +4,7 @@
 
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::generate::{differences, generate, write_atomically};
-use capsule_mpc_generator::tables::{Silent, Tables};
+use capsule_mpc_generator::tables::{Silent, TableError, Tables};
 use std::path::Path;
 use std::process::Command;
 
@@ -33,6 +33,13 @@ fn committed_tables_refuse_another_config() {
     let bytes = std::fs::read("generated/tables.bin").unwrap();
     let err =
         Tables::from_bytes(&bytes[..bytes.len() / 2], &Config::embedded_default()).unwrap_err();
+    assert!(err.to_string().contains("truncated or corrupted"), "{err}");
+    // One flipped bit in the middle of the payload (inside the stored
+    // plans) still decodes; the SHA-256 trailer refuses it.
+    let mut flipped = bytes.clone();
+    flipped[bytes.len() / 2] ^= 0x10;
+    let err = Tables::from_bytes(&flipped, &Config::embedded_default()).unwrap_err();
+    assert!(matches!(err, TableError::Checksum { .. }), "{err}");
     assert!(err.to_string().contains("truncated or corrupted"), "{err}");
 }
 

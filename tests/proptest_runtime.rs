@@ -295,6 +295,7 @@ struct SettingsCase {
     position_noise_m: f64,
     disturbance_bound: f64,
     max_actuation_samples: usize,
+    reacquire_after_rejections: usize,
 }
 
 prop_compose! {
@@ -307,10 +308,12 @@ prop_compose! {
         position_noise_m in wild_f64(2e-3),
         disturbance_bound in wild_f64(1.0),
         max_actuation_samples in prop_oneof![4 => 1..=N, 1 => any::<usize>()],
+        reacquire_after_rejections in prop_oneof![4 => 0..=8usize, 1 => any::<usize>()],
     ) -> SettingsCase {
         SettingsCase {
             sampling, switching, compensate_delay, tracking_time_s, extra_delay_s,
             position_noise_m, disturbance_bound, max_actuation_samples,
+            reacquire_after_rejections,
         }
     }
 }
@@ -326,6 +329,7 @@ impl SettingsCase {
         s.position_noise_m = self.position_noise_m;
         s.disturbance_bound = self.disturbance_bound;
         s.max_actuation_samples = self.max_actuation_samples;
+        s.reacquire_after_rejections = self.reacquire_after_rejections;
         s
     }
 }

@@ -34,7 +34,7 @@
 extern "C" {
 #endif
 
-#define CAPSULE_MPC_ABI_VERSION 1u
+#define CAPSULE_MPC_ABI_VERSION 2u
 
 /* Error codes. */
 #define CAPSULE_MPC_OK 0
@@ -61,6 +61,7 @@ extern "C" {
 #define CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED 3 /* frame implausible, ignored */
 #define CAPSULE_MPC_STATUS_MEASUREMENT_LOST 4     /* no frame: predicted only */
 #define CAPSULE_MPC_STATUS_NO_TARGET 5            /* zero gradient */
+#define CAPSULE_MPC_STATUS_REACQUIRED 6           /* estimate was wrong: restarted at this frame */
 
 /* Opaque controller; a handle is the buffer given to capsule_mpc_init. */
 typedef struct capsule_mpc capsule_mpc_t;

@@ -26,7 +26,7 @@ use core::mem::{align_of, size_of};
 use core::ptr;
 
 /// ABI version: bumped on any change of a signature, struct or constant.
-pub const CAPSULE_MPC_ABI_VERSION: u32 = 1;
+pub const CAPSULE_MPC_ABI_VERSION: u32 = 2;
 
 pub const CAPSULE_MPC_OK: i32 = 0;
 pub const CAPSULE_MPC_ERR_NULL_POINTER: i32 = -1;
@@ -49,6 +49,7 @@ pub const CAPSULE_MPC_STATUS_ITERATION_LIMIT: i32 = RuntimeStatus::IterationLimi
 pub const CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED: i32 = RuntimeStatus::MeasurementRejected as i32;
 pub const CAPSULE_MPC_STATUS_MEASUREMENT_LOST: i32 = RuntimeStatus::MeasurementLost as i32;
 pub const CAPSULE_MPC_STATUS_NO_TARGET: i32 = RuntimeStatus::NoTarget as i32;
+pub const CAPSULE_MPC_STATUS_REACQUIRED: i32 = RuntimeStatus::Reacquired as i32;
 
 const M: usize = <Solver as PlanSolver<NX, K>>::M;
 const NX: usize = capsule_mpc_runtime::generated::controller::spec::NX;

@@ -117,6 +117,7 @@ fn rust_consts(src: &str) -> BTreeMap<String, i64> {
             }
             "CAPSULE_MPC_STATUS_MEASUREMENT_LOST" => CAPSULE_MPC_STATUS_MEASUREMENT_LOST.into(),
             "CAPSULE_MPC_STATUS_NO_TARGET" => CAPSULE_MPC_STATUS_NO_TARGET.into(),
+            "CAPSULE_MPC_STATUS_REACQUIRED" => CAPSULE_MPC_STATUS_REACQUIRED.into(),
             _ => panic!("no evaluator for {name}: add it to tests/header.rs"),
         }
     };

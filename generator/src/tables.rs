@@ -16,10 +16,13 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-/// Bumped whenever the table layout or its meaning changes.
-pub const TABLE_FORMAT_VERSION: u32 = 1;
+/// Bumped whenever the table layout or its meaning changes (2: SHA-256
+/// trailer over the payload).
+pub const TABLE_FORMAT_VERSION: u32 = 2;
 /// First bytes of every table file.
 pub const TABLE_MAGIC: [u8; 8] = *b"CAPSMPC\0";
+/// Length of the SHA-256 trailer that ends every table file, bytes.
+pub const TABLE_CHECKSUM_BYTES: usize = 32;
 /// A plan "reaches" its target when its final position error is below this, m.
 pub const REACH_TOLERANCE_M: f64 = 5.0e-4;
 /// Speed half-range of the warm-start index, m/s (plans peak near 0.35 m/s).
@@ -84,6 +87,8 @@ pub struct SwitchingConstants {
     pub x_diameter: f64,
 }
 
+/// `magic` and `format_version` must stay the first two fields in every
+/// format version: `Tables::from_bytes` reads them before anything else.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TableHeader {
     pub magic: [u8; 8],
@@ -119,6 +124,8 @@ pub enum TableError {
     Magic { found: [u8; 8] },
     #[error("table file format version {found}, this build reads version {expected}; regenerate")]
     Version { found: u32, expected: u32 },
+    #[error("table file is truncated or corrupted: payload SHA-256 is {computed}, the file stores {stored}; regenerate")]
+    Checksum { stored: String, computed: String },
     #[error("table file was made from a different config (hash {found}, config hash {expected}); regenerate")]
     ConfigMismatch { found: String, expected: String },
 }
@@ -134,32 +141,62 @@ pub fn hex(bytes: &[u8]) -> String {
 }
 
 impl Tables {
-    /// Serializes with bincode (standard config).
+    /// File layout: bincode(Tables) (standard config, header first), then a
+    /// [`TABLE_CHECKSUM_BYTES`]-byte SHA-256 of everything before it. The
+    /// checksum catches what decoding cannot: a flipped bit inside a stored
+    /// float still decodes, to a wrong plan.
     pub fn to_bytes(&self) -> Vec<u8> {
-        bincode::serde::encode_to_vec(self, bincode::config::standard()).expect("tables encode")
+        let mut bytes = bincode::serde::encode_to_vec(self, bincode::config::standard())
+            .expect("tables encode");
+        let checksum: [u8; TABLE_CHECKSUM_BYTES] = Sha256::digest(&bytes).into();
+        bytes.extend_from_slice(&checksum);
+        bytes
     }
 
-    /// Decodes and checks magic, version and the config hash.
+    /// Checks magic and format version (from the header alone, so a file of
+    /// another version is named as such, not as corrupt), then the
+    /// checksum, then decodes and checks the config hash.
     pub fn from_bytes(bytes: &[u8], config: &Config) -> Result<Tables, TableError> {
-        let (tables, used): (Tables, usize) =
-            bincode::serde::decode_from_slice(bytes, bincode::config::standard())
-                .map_err(|e| TableError::Corrupt(e.to_string()))?;
-        if used != bytes.len() {
-            return Err(TableError::Corrupt(format!(
-                "{} trailing bytes after the tables",
-                bytes.len() - used
-            )));
+        let standard = bincode::config::standard();
+        let corrupt = |e: bincode::error::DecodeError| TableError::Corrupt(e.to_string());
+        let (magic, _): ([u8; 8], usize) =
+            bincode::serde::decode_from_slice(bytes, standard).map_err(corrupt)?;
+        if magic != TABLE_MAGIC {
+            return Err(TableError::Magic { found: magic });
         }
-        let h = &tables.header;
-        if h.magic != TABLE_MAGIC {
-            return Err(TableError::Magic { found: h.magic });
-        }
-        if h.format_version != TABLE_FORMAT_VERSION {
+        // The version alone (after the magic): a file of another version
+        // may lay out the rest differently and carry no checksum.
+        let ((_, format_version), _): (([u8; 8], u32), usize) =
+            bincode::serde::decode_from_slice(bytes, standard).map_err(corrupt)?;
+        if format_version != TABLE_FORMAT_VERSION {
             return Err(TableError::Version {
-                found: h.format_version,
+                found: format_version,
                 expected: TABLE_FORMAT_VERSION,
             });
         }
+        let Some(payload_len) = bytes.len().checked_sub(TABLE_CHECKSUM_BYTES) else {
+            return Err(TableError::Corrupt(format!(
+                "{} bytes, shorter than the {TABLE_CHECKSUM_BYTES}-byte checksum",
+                bytes.len()
+            )));
+        };
+        let (payload, stored) = bytes.split_at(payload_len);
+        let computed: [u8; TABLE_CHECKSUM_BYTES] = Sha256::digest(payload).into();
+        if stored != computed {
+            return Err(TableError::Checksum {
+                stored: hex(stored),
+                computed: hex(&computed),
+            });
+        }
+        let (tables, used): (Tables, usize) =
+            bincode::serde::decode_from_slice(payload, standard).map_err(corrupt)?;
+        if used != payload.len() {
+            return Err(TableError::Corrupt(format!(
+                "{} trailing bytes after the tables",
+                payload.len() - used
+            )));
+        }
+        let h = &tables.header;
         let expected = config_hash(config);
         if h.config_hash != expected {
             return Err(TableError::ConfigMismatch {
@@ -480,6 +517,153 @@ mod tests {
         assert_eq!(a.nearest(0.0399), Some(16));
         assert_eq!(a.nearest(0.05), None);
         assert!((a.value(0) + 0.04).abs() < 1e-15);
+    }
+
+    /// A distinctive stored value, found in the encoding by its bytes.
+    const MARKER_T_PER_M: f64 = 0.012_345_678_9;
+
+    /// Small tables with the embedded config's header (the file checks do
+    /// not depend on the contents).
+    fn small_tables(config: &Config) -> Tables {
+        Tables {
+            header: TableHeader {
+                magic: TABLE_MAGIC,
+                format_version: TABLE_FORMAT_VERSION,
+                config_hash: config_hash(config),
+                generator_version: "test".to_string(),
+            },
+            plan_steps: 2,
+            plan_axis: Axis::symmetric(0.01, 0.01),
+            plans: vec![PlanEntry {
+                e0: vec![0.01, 0.0],
+                plan: Plan {
+                    u: vec![MARKER_T_PER_M, -0.02],
+                    states: vec![vec![0.01, 0.0], vec![0.005, -0.1], vec![0.0, 0.0]],
+                    cost: 1.5,
+                    iterations: 3,
+                },
+                reached: true,
+            }],
+            index_position_axis: Axis::symmetric(0.01, 0.01),
+            index_speed_axis: Axis::symmetric(0.1, 0.1),
+            index: vec![(0, 0), (0, 1), (u16::MAX, 0)],
+            switching: SwitchingConstants {
+                l_f: 1.0,
+                l_l: 2.0,
+                l_v: 3.0,
+                x_diameter: 0.1,
+            },
+        }
+    }
+
+    #[test]
+    fn tables_round_trip_with_a_checksum_trailer() {
+        let config = Config::embedded_default();
+        let tables = small_tables(&config);
+        let bytes = tables.to_bytes();
+        let payload = &bytes[..bytes.len() - TABLE_CHECKSUM_BYTES];
+        let digest: [u8; 32] = Sha256::digest(payload).into();
+        assert_eq!(&bytes[payload.len()..], &digest[..]);
+        assert_eq!(Tables::from_bytes(&bytes, &config).unwrap(), tables);
+    }
+
+    /// The case the checksum exists for: one flipped bit inside a stored
+    /// float still decodes (to a different plan), and is refused.
+    #[test]
+    fn a_flipped_bit_inside_a_float_is_refused_by_the_checksum() {
+        let config = Config::embedded_default();
+        let mut bytes = small_tables(&config).to_bytes();
+        let marker = MARKER_T_PER_M.to_le_bytes();
+        let at = bytes
+            .windows(8)
+            .position(|w| w == marker)
+            .expect("the marker float is stored as 8 little-endian bytes");
+        bytes[at] ^= 1;
+        let payload = &bytes[..bytes.len() - TABLE_CHECKSUM_BYTES];
+        let (decoded, _): (Tables, usize) =
+            bincode::serde::decode_from_slice(payload, bincode::config::standard())
+                .expect("the corrupted payload still decodes");
+        assert_ne!(decoded.plans[0].plan.u[0], MARKER_T_PER_M);
+        let err = Tables::from_bytes(&bytes, &config).unwrap_err();
+        assert!(matches!(err, TableError::Checksum { .. }), "{err}");
+        assert!(err.to_string().contains("SHA-256"), "{err}");
+    }
+
+    /// Every single-bit flip anywhere in the file is refused: in the magic
+    /// or version by those checks, elsewhere by the checksum.
+    #[test]
+    fn every_single_bit_flip_is_refused() {
+        let config = Config::embedded_default();
+        let bytes = small_tables(&config).to_bytes();
+        for bit in 0..8 * bytes.len() {
+            let mut flipped = bytes.clone();
+            flipped[bit / 8] ^= 1 << (bit % 8);
+            let err = Tables::from_bytes(&flipped, &config).unwrap_err();
+            if bit >= 8 * 9 {
+                // Past the magic and the one-byte version.
+                assert!(
+                    matches!(err, TableError::Checksum { .. }),
+                    "bit {bit}: {err}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn every_truncation_is_refused() {
+        let config = Config::embedded_default();
+        let bytes = small_tables(&config).to_bytes();
+        for len in 0..bytes.len() {
+            let err = Tables::from_bytes(&bytes[..len], &config).unwrap_err();
+            assert!(
+                err.to_string().contains("truncated or corrupted"),
+                "{len}: {err}"
+            );
+        }
+    }
+
+    /// A version-1 file (plain bincode, no checksum) is named as such, not
+    /// as corrupt.
+    #[test]
+    fn a_version_1_file_is_refused_with_the_version_error() {
+        let config = Config::embedded_default();
+        let mut old = small_tables(&config);
+        old.header.format_version = 1;
+        let bytes = bincode::serde::encode_to_vec(&old, bincode::config::standard()).unwrap();
+        let err = Tables::from_bytes(&bytes, &config).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                TableError::Version {
+                    found: 1,
+                    expected: 2
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("format version 1"), "{err}");
+    }
+
+    /// A wrong magic is reported as such, whatever follows it.
+    #[test]
+    fn a_wrong_magic_is_refused_with_the_magic_error() {
+        let config = Config::embedded_default();
+        let mut bytes = small_tables(&config).to_bytes();
+        bytes[..8].copy_from_slice(b"\x89PNG\r\n\x1a\n");
+        let err = Tables::from_bytes(&bytes, &config).unwrap_err();
+        assert!(matches!(err, TableError::Magic { .. }), "{err}");
+        let err = Tables::from_bytes(b"CAPSMPC", &config).unwrap_err();
+        assert!(matches!(err, TableError::Corrupt(_)), "{err}");
+    }
+
+    #[test]
+    fn another_config_is_refused_after_the_checksum_passes() {
+        let config = Config::embedded_default();
+        let mut other = config.clone();
+        other.capsule[0].sphere_radius_m *= 2.0;
+        let bytes = small_tables(&config).to_bytes();
+        let err = Tables::from_bytes(&bytes, &other).unwrap_err();
+        assert!(matches!(err, TableError::ConfigMismatch { .. }), "{err}");
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The scanner-cycle controller: estimator + generated solver + switching
 //! rule + fault handling, in one fixed-size struct.
 
-use crate::estimator::CapsuleFilter;
+use crate::estimator::{CapsuleFilter, REACQUIRE_SPEED_STD_M_PER_S};
 use crate::generated::{PlanSolver, SolveReport, SolveStatus};
 use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
@@ -58,6 +58,14 @@ pub struct ControllerSettings {
     pub hold_enter_speed_m_per_s: f64,
     pub hold_release_position_m: f64,
     pub hold_release_speed_m_per_s: f64,
+    /// Re-acquisition: after this many gated-out frames in a row (finite,
+    /// within `MAX_ABS_POSITION_M`, but beyond `MEASUREMENT_GATE_NIS` of the
+    /// estimate) with no accepted frame in between, the estimate is taken
+    /// to be wrong (e.g. a `reset` to the wrong place) and is restarted at
+    /// the measured positions. Lost and invalid frames neither count nor
+    /// break the run. 0 disables re-acquisition; 1 is refused (every single
+    /// outlier would restart the estimate).
+    pub reacquire_after_rejections: usize,
 }
 
 /// Default hold entry: 0.7 of the 1 mm settle tolerance, m.
@@ -75,6 +83,11 @@ pub const HOLD_DRIFT_HORIZON_S: f64 = 1.0;
 pub const HOLD_NATURAL_FREQUENCY_RAD_PER_S: f64 = 6.0;
 /// The hold law uses at most this fraction of u_max.
 pub const HOLD_MAX_GRADIENT_FRACTION: f64 = 0.25;
+/// Default re-acquisition count, frames: 0.2 s at the default constant
+/// sampling (20 ms actuation + 20 ms tracking per frame). Five gross
+/// outliers in a row, with none of the frames between them accepted, are
+/// far likelier a wrong estimate than wrong data.
+pub const REACQUIRE_AFTER_REJECTIONS: usize = 5;
 
 /// Normalized innovation squared above which a measurement is rejected
 /// (10 sigma: only gross outliers and wrong data).
@@ -105,6 +118,12 @@ pub enum RuntimeStatus {
     MeasurementLost = 4,
     /// No target set: zero gradient.
     NoTarget = 5,
+    /// `reacquire_after_rejections` frames in a row disagreed with the
+    /// estimate: it was restarted at this frame's positions (speeds zero,
+    /// wide uncertainty) and the plan restarted. Reported for that one
+    /// cycle whatever the plan (which may be the fallback or, without a
+    /// target, zero).
+    Reacquired = 6,
 }
 
 /// Errors of calls with bad arguments (nothing changes when one is returned).
@@ -156,6 +175,9 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     /// Mean acceleration per unit gradient near rest, (m/s^2)/(T/m): fixed
     /// by the model, computed once for the hold law.
     mean_gain: f64,
+    /// Gated-out frames since the last accepted one (see
+    /// `ControllerSettings::reacquire_after_rejections`).
+    gated_rejections: usize,
 }
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
@@ -174,6 +196,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             hold_enter_speed_m_per_s: HOLD_ENTER_SPEED_M_PER_S,
             hold_release_position_m: HOLD_RELEASE_POSITION_M,
             hold_release_speed_m_per_s: HOLD_RELEASE_SPEED_M_PER_S,
+            reacquire_after_rejections: REACQUIRE_AFTER_REJECTIONS,
         }
     }
 
@@ -192,6 +215,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             holding: false,
             planned_phase_samples: settings.max_actuation_samples,
             mean_gain: mean_gradient_gain::<S, NX, K>(),
+            gated_rejections: 0,
         };
         c.reset(positions_m)?;
         Ok(c)
@@ -210,8 +234,23 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         for (i, &p) in positions_m.iter().enumerate() {
             self.filters[i] = CapsuleFilter::new(p, std);
         }
+        self.gated_rejections = 0;
         self.restart_plan();
         Ok(())
+    }
+
+    /// Restarts the estimate at measured positions `z` (length checked by
+    /// the caller). Unlike `reset`, the capsules are not known to be at
+    /// rest: the controller has been pushing them from a wrong estimate,
+    /// so the speed uncertainty is wide enough for the next frame to pass
+    /// the gate and fix the speeds.
+    fn reacquire(&mut self, z: &[f64]) {
+        let std = self.settings.position_noise_m.max(1e-6);
+        for (i, &p) in z.iter().enumerate() {
+            self.filters[i] = CapsuleFilter::with_speed_std(p, std, REACQUIRE_SPEED_STD_M_PER_S);
+        }
+        self.gated_rejections = 0;
+        self.restart_plan();
     }
 
     /// Forgets the plan and the mode (new start state or new target).
@@ -312,6 +351,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         for i in 0..NX / 2 {
             self.filters[i].mean = [x[2 * i], x[2 * i + 1]];
         }
+        self.gated_rejections = 0;
         Ok(self.plan_from(x, RuntimeStatus::Ok, 1))
     }
 
@@ -330,16 +370,32 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             Some(z) if z.len() != m => {
                 return Err(RuntimeError::WrongLength("measured_positions_m"))
             }
-            Some(z) => {
-                if !self.accept_measurement(z) {
-                    status = RuntimeStatus::MeasurementRejected;
-                } else {
-                    let r = sq(self.settings.position_noise_m.max(1e-6));
-                    for (i, &zi) in z.iter().enumerate() {
-                        self.filters[i].update(zi, r);
+            Some(z) => match self.classify_measurement(z) {
+                Measurement::Invalid => status = RuntimeStatus::MeasurementRejected,
+                Measurement::GatedOut => {
+                    self.gated_rejections = self.gated_rejections.saturating_add(1);
+                    let after = self.settings.reacquire_after_rejections;
+                    if after != 0 && self.gated_rejections >= after {
+                        self.reacquire(z);
+                        status = RuntimeStatus::Reacquired;
+                    } else {
+                        status = RuntimeStatus::MeasurementRejected;
                     }
                 }
-            }
+                Measurement::Accepted => {
+                    self.gated_rejections = 0;
+                    let r = sq(self.settings.position_noise_m.max(1e-6));
+                    for (i, &zi) in z.iter().enumerate() {
+                        let f = &mut self.filters[i];
+                        f.update(zi, r);
+                        // Behind a wide gate (just after re-acquisition, or
+                        // with a large disturbance bound) one frame can
+                        // imply any speed; beyond the physical range the
+                        // model's prediction overflows to NaN.
+                        f.mean[1] = f.mean[1].clamp(-MAX_ABS_SPEED_M_PER_S, MAX_ABS_SPEED_M_PER_S);
+                    }
+                }
+            },
         }
         // Tracking + delay pass with u = 0 before the next actuation.
         let wait_s = self.settings.tracking_time_s + self.settings.extra_delay_s;
@@ -354,7 +410,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             Sampling::Ideal | Sampling::Constant => 1,
             Sampling::Variable => self.settings.max_actuation_samples,
         };
-        let out = self.plan_from(&x_start, status, n_max);
+        let mut out = self.plan_from(&x_start, status, n_max);
+        if status == RuntimeStatus::Reacquired {
+            // The host must learn that the estimate jumped, even when the
+            // plan is the fallback or there is no target.
+            out.status = RuntimeStatus::Reacquired;
+        }
         // The estimator follows the actuation that will be played.
         for k in 0..out.actuation_samples {
             self.predict_filters(out.gradients_t_per_m[k], S::DT_S);
@@ -362,15 +423,26 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         Ok(out)
     }
 
-    fn accept_measurement(&self, z: &[f64]) -> bool {
+    /// Invalid when any position is non-finite or beyond
+    /// `MAX_ABS_POSITION_M` (bad data, says nothing about the estimate);
+    /// else gated out when any innovation exceeds the gate.
+    fn classify_measurement(&self, z: &[f64]) -> Measurement {
+        if z.iter()
+            .any(|zi| !zi.is_finite() || libm::fabs(*zi) > MAX_ABS_POSITION_M)
+        {
+            return Measurement::Invalid;
+        }
         let r = sq(self.settings.position_noise_m.max(1e-6));
-        z.iter().enumerate().all(|(i, &zi)| {
+        let within_gate = z.iter().enumerate().all(|(i, &zi)| {
             let f = &self.filters[i];
             let innovation = zi - f.mean[0];
-            zi.is_finite()
-                && zi.abs() <= MAX_ABS_POSITION_M
-                && innovation * innovation / (f.cov[0] + r) <= MEASUREMENT_GATE_NIS
-        })
+            innovation * innovation / (f.cov[0] + r) <= MEASUREMENT_GATE_NIS
+        });
+        if within_gate {
+            Measurement::Accepted
+        } else {
+            Measurement::GatedOut
+        }
     }
 
     fn predict_filters(&mut self, u: f64, duration_s: f64) {
@@ -575,6 +647,17 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 }
 
+/// What a finite-length frame is to the estimator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Measurement {
+    Accepted,
+    /// Non-finite or beyond the physical range: ignored, not counted.
+    Invalid,
+    /// Plausible but beyond the innovation gate: ignored, counted toward
+    /// re-acquisition.
+    GatedOut,
+}
+
 /// A one-sample plan (rest zero) for single-step prediction.
 fn single<const K: usize>(u: f64) -> [f64; K] {
     let mut p = [0.0; K];
@@ -636,7 +719,7 @@ fn mean_gradient_gain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>() -
 
 /// Every name `RuntimeError::BadSetting` can carry (the settings that are
 /// range-checked), for hosts and tests that map errors back to fields.
-pub const SETTING_NAMES: [&str; 9] = [
+pub const SETTING_NAMES: [&str; 10] = [
     "tracking_time_s",
     "extra_delay_s",
     "position_noise_m",
@@ -646,6 +729,7 @@ pub const SETTING_NAMES: [&str; 9] = [
     "hold_enter_speed_m_per_s",
     "hold_release_position_m",
     "hold_release_speed_m_per_s",
+    "reacquire_after_rejections",
 ];
 
 fn check_settings(s: &ControllerSettings, n: usize) -> Result<(), RuntimeError> {
@@ -680,6 +764,9 @@ fn check_settings(s: &ControllerSettings, n: usize) -> Result<(), RuntimeError> 
         || s.hold_release_speed_m_per_s < s.hold_enter_speed_m_per_s
     {
         return Err(RuntimeError::BadSetting("hold_release_speed_m_per_s"));
+    }
+    if s.reacquire_after_rejections == 1 {
+        return Err(RuntimeError::BadSetting("reacquire_after_rejections"));
     }
     Ok(())
 }

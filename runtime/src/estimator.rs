@@ -14,15 +14,31 @@ pub struct CapsuleFilter {
 /// start at rest, but the estimator must not be certain of it.
 pub const INITIAL_SPEED_STD_M_PER_S: f64 = 0.01;
 
+/// Speed uncertainty (standard deviation) after re-acquisition, m/s: the
+/// capsules may be moving at up to their terminal speed at u_max (0.64 m/s
+/// for the faster default capsule). Wide, so that the next frame passes the
+/// gate wherever the capsules went and its update sets the speeds.
+pub const REACQUIRE_SPEED_STD_M_PER_S: f64 = 0.5;
+
 impl CapsuleFilter {
+    /// At rest at `position_m` (the caller knows the capsule is at rest).
     pub const fn new(position_m: f64, position_std_m: f64) -> CapsuleFilter {
+        CapsuleFilter::with_speed_std(position_m, position_std_m, INITIAL_SPEED_STD_M_PER_S)
+    }
+
+    /// At `position_m`, speed estimate zero with uncertainty `speed_std_m_per_s`.
+    pub const fn with_speed_std(
+        position_m: f64,
+        position_std_m: f64,
+        speed_std_m_per_s: f64,
+    ) -> CapsuleFilter {
         CapsuleFilter {
             mean: [position_m, 0.0],
             cov: [
                 position_std_m * position_std_m,
                 0.0,
                 0.0,
-                INITIAL_SPEED_STD_M_PER_S * INITIAL_SPEED_STD_M_PER_S,
+                speed_std_m_per_s * speed_std_m_per_s,
             ],
         }
     }
