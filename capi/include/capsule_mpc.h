@@ -62,6 +62,7 @@ extern "C" {
 #define CAPSULE_MPC_STATUS_MEASUREMENT_LOST 4     /* no frame: predicted only */
 #define CAPSULE_MPC_STATUS_NO_TARGET 5            /* zero gradient */
 #define CAPSULE_MPC_STATUS_REACQUIRED 6           /* estimate was wrong: restarted at this frame */
+#define CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP 7  /* QP took more iterations than measured offline here */
 
 /* Opaque controller; a handle is the buffer given to capsule_mpc_init. */
 typedef struct capsule_mpc capsule_mpc_t;

@@ -50,6 +50,7 @@ pub const CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED: i32 = RuntimeStatus::Measurem
 pub const CAPSULE_MPC_STATUS_MEASUREMENT_LOST: i32 = RuntimeStatus::MeasurementLost as i32;
 pub const CAPSULE_MPC_STATUS_NO_TARGET: i32 = RuntimeStatus::NoTarget as i32;
 pub const CAPSULE_MPC_STATUS_REACQUIRED: i32 = RuntimeStatus::Reacquired as i32;
+pub const CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP: i32 = RuntimeStatus::AboveIterationMap as i32;
 
 const M: usize = <Solver as PlanSolver<NX, K>>::M;
 const NX: usize = capsule_mpc_runtime::generated::controller::spec::NX;

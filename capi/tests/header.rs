@@ -118,6 +118,9 @@ fn rust_consts(src: &str) -> BTreeMap<String, i64> {
             "CAPSULE_MPC_STATUS_MEASUREMENT_LOST" => CAPSULE_MPC_STATUS_MEASUREMENT_LOST.into(),
             "CAPSULE_MPC_STATUS_NO_TARGET" => CAPSULE_MPC_STATUS_NO_TARGET.into(),
             "CAPSULE_MPC_STATUS_REACQUIRED" => CAPSULE_MPC_STATUS_REACQUIRED.into(),
+            "CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP" => {
+                CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP.into()
+            }
             _ => panic!("no evaluator for {name}: add it to tests/header.rs"),
         }
     };

@@ -309,7 +309,7 @@ pub fn capi(data: &[u8]) {
                 let mut s = -100i32;
                 let rc = unsafe { capi::capsule_mpc_last_status(h, &mut s) };
                 assert_eq!(rc, capi::CAPSULE_MPC_OK);
-                assert!((0..=6).contains(&s), "last status {s}");
+                assert!((0..=7).contains(&s), "last status {s}");
             }
             7 => {
                 let Some(sel) = inp.byte() else { return };
@@ -456,7 +456,7 @@ fn next_actuation(
         (1..=n_horizon as u32).contains(&samples),
         "samples {samples}"
     );
-    assert!((0..=6).contains(&status), "status {status}");
+    assert!((0..=7).contains(&status), "status {status}");
     let written = capacity.min(k_plan);
     for (k, u) in g[..written].iter().enumerate() {
         assert!(

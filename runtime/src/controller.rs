@@ -124,6 +124,11 @@ pub enum RuntimeStatus {
     /// cycle whatever the plan (which may be the fallback or, without a
     /// target, zero).
     Reacquired = 6,
+    /// A QP of this solve took more active-set iterations than the offline
+    /// map (`capsule-mpc generate`) measured in the state's index cell: the
+    /// plan converged and is used, but the state lies outside what the
+    /// offline worst-case timing covered.
+    AboveIterationMap = 7,
 }
 
 /// Errors of calls with bad arguments (nothing changes when one is returned).
@@ -488,6 +493,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
         if report.status == SolveStatus::IterationLimit && out.status == RuntimeStatus::Ok {
             out.status = RuntimeStatus::IterationLimit;
+        }
+        let measured = S::qp_iterations_measured(&e);
+        if measured > 0 && report.max_qp_iterations > measured && out.status == RuntimeStatus::Ok {
+            out.status = RuntimeStatus::AboveIterationMap;
         }
         for (o, &u) in out.gradients_t_per_m.iter_mut().zip(self.solver.plan()) {
             // The solver keeps |u| <= u_max; clamp again as a last invariant.
