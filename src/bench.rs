@@ -194,10 +194,16 @@ impl WarmCase {
     }
 }
 
-/// A controller with the zero target set (states are then relative states).
+/// A controller with the zero target set (states are then relative states),
+/// ideal sampling.
 pub fn prototype_controller() -> Result<DefaultController> {
+    prototype_controller_with(RtSampling::Ideal)
+}
+
+/// A controller with the zero target set and the given sampling mode.
+pub fn prototype_controller_with(sampling: RtSampling) -> Result<DefaultController> {
     let mut settings = DefaultController::default_settings();
-    settings.sampling = RtSampling::Ideal;
+    settings.sampling = sampling;
     let mut c = DefaultController::new(settings, &[0.0; M])
         .map_err(|e| anyhow::anyhow!("controller: {e:?}"))?;
     c.set_target(&[0.0; NX])
@@ -217,6 +223,13 @@ fn timed<R>(f: impl FnOnce() -> R) -> (R, u64) {
 pub fn time_state(proto: &DefaultController, e: &[f64; NX]) -> StateTiming {
     // Solver only.
     let mut s = solver::Solver::new();
+    let settings = proto.settings();
+    let coast_s = settings.tracking_time_s + settings.extra_delay_s;
+    match settings.sampling {
+        RtSampling::Ideal => {}
+        RtSampling::Constant => s.set_schedule(1, coast_s),
+        RtSampling::Variable => s.set_schedule(settings.max_actuation_samples, coast_s),
+    }
     let (cold, solver_cold) = timed(|| black_box(&mut s).solve(black_box(e)));
     let e1 = solver::predict(e, s.plan(), 1);
     s.shift(1);
@@ -972,7 +985,7 @@ pub fn run_cli(args: &BenchArgs) -> Result<()> {
         args.states, args.seed
     );
     let states = sample_states(&config, args.states, args.seed)?;
-    let proto = prototype_controller()?;
+    let proto = prototype_controller_with(args.sampling.runtime())?;
     let peer_count = args.peer_states.min(states.len());
     let result = std::thread::scope(|scope| {
         scope
@@ -983,6 +996,7 @@ pub fn run_cli(args: &BenchArgs) -> Result<()> {
     let mut report = result;
     report["states"] = json!(states.len());
     report["seed"] = json!(args.seed);
+    report["sampling"] = json!(args.sampling.name());
     report["spec_mismatch"] = json!(mismatch);
     if let Some(path) = &args.json {
         crate::report::write_json_atomic(path, &report)?;

@@ -83,6 +83,16 @@ pub enum Sampling {
 }
 
 impl Sampling {
+    /// The runtime's sampling mode.
+    pub fn runtime(self) -> capsule_mpc_runtime::controller::Sampling {
+        use capsule_mpc_runtime::controller::Sampling as Rt;
+        match self {
+            Sampling::Ideal => Rt::Ideal,
+            Sampling::Constant => Rt::Constant,
+            Sampling::Variable => Rt::Variable,
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Sampling::Ideal => "ideal",
@@ -202,6 +212,13 @@ pub struct BenchArgs {
     pub peer_states: usize,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Schedule of the timed controller step and solver: ideal (samples back
+    /// to back), constant (each sample followed by the modelled tracking
+    /// coast) or variable (phases of up to N samples; one cycle refines the
+    /// plan once per sample of its phase). The peers always solve the ideal
+    /// problem.
+    #[arg(long, value_enum, default_value_t = Sampling::Ideal)]
+    pub sampling: Sampling,
     /// Write the timings (JSON) here.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,

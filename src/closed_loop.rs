@@ -9,7 +9,7 @@ use crate::report::{MeasurementRecord, RunReport};
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig};
 use capsule_mpc_generator::model::Model;
-use capsule_mpc_runtime::controller::{Sampling as RtSampling, SwitchingRule};
+use capsule_mpc_runtime::controller::SwitchingRule;
 use capsule_mpc_runtime::generated::PlanSolver;
 use capsule_mpc_runtime::{Controller, RuntimeStatus};
 use std::time::Instant;
@@ -112,11 +112,7 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         opts.seed,
     )?;
     let mut settings = Controller::<S, NX, K>::default_settings();
-    settings.sampling = match opts.sampling {
-        Sampling::Ideal => RtSampling::Ideal,
-        Sampling::Constant => RtSampling::Constant,
-        Sampling::Variable => RtSampling::Variable,
-    };
+    settings.sampling = opts.sampling.runtime();
     settings.switching = opts.switching;
     settings.compensate_delay = opts.compensate_delay;
     settings.extra_delay_s = opts.extra_delay_s;
