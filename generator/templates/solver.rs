@@ -398,6 +398,12 @@ pub struct BoxQp {
     /// -1 at lower bound, +1 at upper bound, 0 free.
     active: [i8; N],
     chol: [[f64; N]; N],
+    /// 1 / chol[r][r]: the substitutions multiply instead of divide.
+    inv_diag: [f64; N],
+    /// Leading rows of `chol` still valid for the current free set: rows
+    /// above the first changed free position depend only on the leading
+    /// block of H, so they are kept.
+    factored: usize,
     rhs: [f64; N],
     newton: [f64; N],
     free: [usize; N],
@@ -419,6 +425,8 @@ impl BoxQp {
             x: [0.0; N],
             active: [0; N],
             chol: [[0.0; N]; N],
+            inv_diag: [0.0; N],
+            factored: 0,
             rhs: [0.0; N],
             newton: [0.0; N],
             free: [0; N],
@@ -431,6 +439,7 @@ impl BoxQp {
     pub fn solve(&mut self) -> (u32, bool) {
         self.x = [0.0; N];
         self.active = [0; N];
+        self.factored = 0;
         let mut iter = 0u32;
         while (iter as usize) < QP_MAX_ITERATIONS {
             iter += 1;
@@ -439,6 +448,7 @@ impl BoxQp {
             if nf > 0 && !self.factor_free(nf) {
                 return (iter, false);
             }
+            self.factored = nf;
             self.free_newton_point(nf);
             // Ratio test from x towards the Newton point.
             let mut t = 1.0;
@@ -472,6 +482,7 @@ impl BoxQp {
                 let up = self.newton[blocking] > self.x[blocking];
                 self.x[blocking] = if up { self.hi[blocking] } else { self.lo[blocking] };
                 self.active[blocking] = if up { 1 } else { -1 };
+                self.keep_rows_before(blocking);
                 continue;
             }
             // Optimal on this face: release the most wrong-signed multiplier.
@@ -499,8 +510,25 @@ impl BoxQp {
                 return (iter, true);
             }
             self.active[release] = 0;
+            self.keep_rows_before(release);
         }
         (iter, false)
+    }
+
+    /// Variable `j` joined or left the free set: Cholesky rows from its
+    /// position in the (index-ordered) free list on must be recomputed.
+    fn keep_rows_before(&mut self, j: usize) {
+        let mut p = 0;
+        let mut c = 0;
+        while c < j {
+            if self.active[c] == 0 {
+                p += 1;
+            }
+            c += 1;
+        }
+        if p < self.factored {
+            self.factored = p;
+        }
     }
 
     fn collect_free(&mut self) -> usize {
@@ -518,7 +546,7 @@ impl BoxQp {
 
     /// Cholesky of H restricted to the free set; false if not positive definite.
     fn factor_free(&mut self, nf: usize) -> bool {
-        let mut r = 0;
+        let mut r = self.factored;
         while r < nf {
             let mut c = 0;
             while c <= r {
@@ -533,8 +561,9 @@ impl BoxQp {
                         return false;
                     }
                     self.chol[r][r] = libm::sqrt(s);
+                    self.inv_diag[r] = 1.0 / self.chol[r][r];
                 } else {
-                    self.chol[r][c] = s / self.chol[c][c];
+                    self.chol[r][c] = s * self.inv_diag[c];
                 }
                 c += 1;
             }
@@ -573,7 +602,7 @@ impl BoxQp {
                 s -= self.chol[r][k] * self.rhs[k];
                 k += 1;
             }
-            self.rhs[r] = s / self.chol[r][r];
+            self.rhs[r] = s * self.inv_diag[r];
             r += 1;
         }
         let mut r = nf;
@@ -585,7 +614,7 @@ impl BoxQp {
                 s -= self.chol[k][r] * self.rhs[k];
                 k += 1;
             }
-            self.rhs[r] = s / self.chol[r][r];
+            self.rhs[r] = s * self.inv_diag[r];
         }
         let mut r = 0;
         while r < nf {
