@@ -135,19 +135,19 @@ fn constant_sampling_settles_and_stays() {
 }
 
 /// Issue 4: variable sampling with the tight rule actuates at least 75 % of
-/// the time until settling and settles no later than constant sampling on
-/// the same scenarios and seeds (mean per scenario), and every run stays
-/// settled. Measured over seeds 1-8: A 1.21 s vs 1.78 s, C 1.57 s vs
-/// 1.86 s; duty until settled 0.85 on average, 0.74 at worst.
+/// the time until settling in every run and settles no later than constant
+/// sampling on the same scenarios and seeds (mean per scenario), and every
+/// run stays settled. Measured over seeds 1-8: A 1.08 s vs 1.78 s, C 1.44 s
+/// vs 1.86 s; duty until settled 0.88-0.91.
 #[test]
 fn variable_sampling_with_the_tight_rule_actuates_longer_and_settles_sooner() {
     let variable = scanner_runs(Sampling::Variable, SwitchingRule::Tight, 1..=4);
     let constant = scanner_runs(Sampling::Constant, SwitchingRule::Tight, 1..=4);
     let mut duty_sum = 0.0;
     for (name, m) in &variable {
-        assert!(m.settle_time_s.is_some_and(|t| t <= 2.5), "{name}: {m:?}");
+        assert!(m.settle_time_s.is_some_and(|t| t <= 2.0), "{name}: {m:?}");
         assert!(m.final_position_error_m <= 1e-3, "{name}: {m:?}");
-        assert!(m.duty_cycle_until_settled >= 0.65, "{name}: {m:?}");
+        assert!(m.duty_cycle_until_settled >= 0.75, "{name}: {m:?}");
         duty_sum += m.duty_cycle_until_settled;
     }
     let mean = duty_sum / variable.len() as f64;
