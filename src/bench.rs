@@ -224,12 +224,8 @@ pub fn time_state(proto: &DefaultController, e: &[f64; NX]) -> StateTiming {
     // Solver only.
     let mut s = solver::Solver::new();
     let settings = proto.settings();
-    let coast_s = settings.tracking_time_s + settings.extra_delay_s;
-    match settings.sampling {
-        RtSampling::Ideal => {}
-        RtSampling::Constant => s.set_schedule(1, coast_s),
-        RtSampling::Variable => s.set_schedule(settings.max_actuation_samples, coast_s),
-    }
+    let (samples, coast_s) = settings.schedule(settings.max_actuation_samples);
+    s.set_schedule(samples, coast_s);
     let (cold, solver_cold) = timed(|| black_box(&mut s).solve(black_box(e)));
     let e1 = solver::predict(e, s.plan(), 1);
     s.shift(1);
@@ -497,6 +493,23 @@ impl QpEngine for ActiveSetEngine {
     }
 }
 
+/// H's upper triangle in compressed sparse columns (column pointers, row
+/// indices, values), dense: the form both clarabel and OSQP take.
+fn upper_triangle_csc(qp: &DenseQp) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    let mut colptr = Vec::with_capacity(N + 1);
+    let mut rowval = Vec::with_capacity(N * (N + 1) / 2);
+    let mut nzval = Vec::with_capacity(N * (N + 1) / 2);
+    colptr.push(0);
+    for c in 0..N {
+        for r in 0..=c {
+            rowval.push(r);
+            nzval.push(qp.h[r][c]);
+        }
+        colptr.push(rowval.len());
+    }
+    (colptr, rowval, nzval)
+}
+
 /// clarabel 0.11 (interior point; no warm start): a new solver per QP.
 #[derive(Debug, Clone, Default)]
 pub struct ClarabelEngine;
@@ -511,17 +524,7 @@ impl QpEngine for ClarabelEngine {
             DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
         };
         // Dense upper triangle of H; A = [I; -I], b = [hi; -lo].
-        let mut colptr = Vec::with_capacity(N + 1);
-        let mut rowval = Vec::with_capacity(N * (N + 1) / 2);
-        let mut nzval = Vec::with_capacity(N * (N + 1) / 2);
-        colptr.push(0);
-        for c in 0..N {
-            for r in 0..=c {
-                rowval.push(r);
-                nzval.push(qp.h[r][c]);
-            }
-            colptr.push(rowval.len());
-        }
+        let (colptr, rowval, nzval) = upper_triangle_csc(qp);
         let p = CscMatrix::new(N, N, colptr, rowval, nzval);
         let a = CscMatrix::new(
             2 * N,
@@ -583,17 +586,7 @@ impl OsqpEngine {
     }
 
     fn upper(qp: &DenseQp) -> osqp::CscMatrix<'static> {
-        let mut indptr = Vec::with_capacity(N + 1);
-        let mut indices = Vec::new();
-        let mut data = Vec::new();
-        indptr.push(0);
-        for c in 0..N {
-            for r in 0..=c {
-                indices.push(r);
-                data.push(qp.h[r][c]);
-            }
-            indptr.push(indices.len());
-        }
+        let (indptr, indices, data) = upper_triangle_csc(qp);
         osqp::CscMatrix {
             nrows: N,
             ncols: N,

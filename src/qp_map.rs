@@ -12,8 +12,10 @@
 
 use anyhow::Result;
 use capsule_mpc_generator::generate::GeneratedFiles;
+use capsule_mpc_runtime::controller::Sampling;
 use capsule_mpc_runtime::generated::controller::{solver, spec, tables};
 use capsule_mpc_runtime::generated::SolveStatus;
+use capsule_mpc_runtime::DefaultController;
 use rayon::prelude::*;
 
 /// The controller module this binary was compiled with.
@@ -32,10 +34,13 @@ pub fn fill_if_compiled(files: &mut GeneratedFiles) -> Result<bool> {
 
 /// The schedules the runtime sets: ideal (back to back), constant sampling
 /// (one sample per phase) and variable sampling at its longest phase, each
-/// with the config's tracking + delay as the coast.
-fn schedules() -> [(usize, f64); 3] {
-    let coast_s = spec::TRACKING_TIME_S + spec::EXTRA_DELAY_S;
-    [(spec::K, 0.0), (1, coast_s), (spec::N, coast_s)]
+/// with the default settings' tracking + delay as the coast.
+pub fn schedules() -> [(usize, f64); 3] {
+    [Sampling::Ideal, Sampling::Constant, Sampling::Variable].map(|sampling| {
+        let mut settings = DefaultController::default_settings();
+        settings.sampling = sampling;
+        settings.schedule(settings.max_actuation_samples)
+    })
 }
 
 /// Centre of index cell `flat` (row-major over e1, v1, e2, v2, ...).

@@ -4,20 +4,19 @@
 //! map is a maximum over exactly these solves), and the map's cell layout
 //! is the solver's own index layout.
 
-use capsule_mpc::qp_map::cell_centre;
-use capsule_mpc_runtime::generated::controller::{solver, spec, tables};
+use capsule_mpc::qp_map::{cell_centre, schedules};
+use capsule_mpc_runtime::generated::controller::{solver, tables};
 use capsule_mpc_runtime::generated::{qp_iteration_map, SolveStatus};
 
 #[test]
 fn cold_solves_at_cell_centres_stay_within_the_map() {
     assert_eq!(qp_iteration_map::CONTROLLER.len(), tables::INDEX.len());
-    let coast_s = spec::TRACKING_TIME_S + spec::EXTRA_DELAY_S;
     let mut checked = 0;
     // Every 5th cell: a spread over the whole index, under a second.
     for c in (0..tables::INDEX.len()).step_by(5) {
         let e = cell_centre(c);
         assert_eq!(solver::index_cell(&e), Some(c), "cell {c}: centre {e:?}");
-        for (samples, coast) in [(spec::K, 0.0), (1, coast_s), (spec::N, coast_s)] {
+        for (samples, coast) in schedules() {
             let mut s = solver::Solver::new();
             s.set_schedule(samples, coast);
             let r = s.solve(&e);

@@ -33,7 +33,6 @@ pub mod spec {
     pub const SQP_ITERATIONS: usize = 2usize;
     /// Active-set iterations allowed per QP.
     pub const QP_MAX_ITERATIONS: usize = 30usize;
-    /// Largest QP iteration count measured offline over the grid.
     /// Halvings tried in the line search.
     pub const LINE_SEARCH_TRIES: usize = 4;
     /// Multipliers below this count as zero in the active-set QP.
@@ -20100,7 +20099,6 @@ pub mod solver {
         }
         /// Returns (iterations, converged). On the iteration bound, `x` is the
         /// last feasible iterate (always within the box).
-        ///
         pub fn solve(&mut self) -> (u32, bool) {
             self.x = [0.0; N];
             self.active = [0; N];

@@ -169,7 +169,6 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
             pub const SQP_ITERATIONS: usize = #sqp;
             /// Active-set iterations allowed per QP.
             pub const QP_MAX_ITERATIONS: usize = #qp_max;
-            /// Largest QP iteration count measured offline over the grid.
             /// Halvings tried in the line search.
             pub const LINE_SEARCH_TRIES: usize = 4;
             /// Multipliers below this count as zero in the active-set QP.

@@ -69,14 +69,18 @@ impl GeneratedFiles {
             .map(|(_, b)| b.as_slice())
     }
 
-    /// Replaces the placeholder QP iteration map with a measured one.
+    /// Puts a measured QP iteration map in place of the placeholder.
     pub fn set_qp_iteration_map(&mut self, controller: &[u8]) -> Result<(), GenerateError> {
-        let text = emit_qp_iteration_map(Some(controller))?;
-        for (p, bytes) in &mut self.files {
-            if p == Path::new(QP_ITERATION_MAP_PATH) {
-                *bytes = text.into_bytes();
-                return Ok(());
-            }
+        let text = emit_qp_iteration_map(Some(controller))?.into_bytes();
+        match self
+            .files
+            .iter_mut()
+            .find(|(p, _)| p == Path::new(QP_ITERATION_MAP_PATH))
+        {
+            Some((_, bytes)) => *bytes = text,
+            None => self
+                .files
+                .push((PathBuf::from(QP_ITERATION_MAP_PATH), text)),
         }
         Ok(())
     }

@@ -435,7 +435,6 @@ impl BoxQp {
 
     /// Returns (iterations, converged). On the iteration bound, `x` is the
     /// last feasible iterate (always within the box).
-    ///
     pub fn solve(&mut self) -> (u32, bool) {
         self.x = [0.0; N];
         self.active = [0; N];

@@ -67,6 +67,26 @@ pub struct ControllerSettings {
     /// outlier would restart the estimate).
     pub reacquire_after_rejections: usize,
 }
+impl ControllerSettings {
+    /// Tracking phase + extra delay: the zero-gradient wait between a
+    /// measurement and the actuation it leads to, s.
+    pub fn wait_s(&self) -> f64 {
+        self.tracking_time_s + self.extra_delay_s
+    }
+
+    /// The actuation schedule the solver models under these settings:
+    /// (samples per actuation phase, zero-gradient coast after each phase
+    /// in s). Ideal sampling has no coast (samples back to back); constant
+    /// sampling plays one sample per phase; variable sampling plays
+    /// `phase_samples`.
+    pub fn schedule(&self, phase_samples: usize) -> (usize, f64) {
+        match self.sampling {
+            Sampling::Ideal => (phase_samples, 0.0),
+            Sampling::Constant => (1, self.wait_s()),
+            Sampling::Variable => (phase_samples, self.wait_s()),
+        }
+    }
+}
 
 /// Default hold entry: 0.7 of the 1 mm settle tolerance, m.
 pub const HOLD_ENTER_POSITION_M: f64 = 0.7e-3;
@@ -272,17 +292,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// it back to back; otherwise each actuation phase is followed by
     /// tracking + delay at zero gradient.
     fn update_schedule(&mut self) {
-        let (samples, coast_s) = match self.settings.sampling {
-            Sampling::Ideal => (S::N, 0.0),
-            Sampling::Constant => (1, self.wait_s()),
-            Sampling::Variable => (self.planned_phase_samples, self.wait_s()),
-        };
+        let (samples, coast_s) = self.settings.schedule(self.planned_phase_samples);
         self.solver.set_schedule(samples, coast_s);
-    }
-
-    /// Tracking phase + extra delay, s.
-    fn wait_s(&self) -> f64 {
-        self.settings.tracking_time_s + self.settings.extra_delay_s
     }
 
     /// Whether the last cycle was in the terminal hold.
@@ -403,7 +414,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             },
         }
         // Tracking + delay pass with u = 0 before the next actuation.
-        let wait_s = self.settings.tracking_time_s + self.settings.extra_delay_s;
+        let wait_s = self.settings.wait_s();
         let measured = self.estimate();
         self.predict_filters(0.0, wait_s);
         let x_start = if self.settings.compensate_delay {
@@ -584,7 +595,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let w = HOLD_NATURAL_FREQUENCY_RAD_PER_S;
         let period_s = match self.settings.sampling {
             Sampling::Ideal => S::DT_S,
-            Sampling::Constant | Sampling::Variable => S::DT_S + self.wait_s(),
+            Sampling::Constant | Sampling::Variable => S::DT_S + self.settings.wait_s(),
         };
         let accel = -(w * w * mean_x + 2.0 * w * mean_v) * period_s / S::DT_S;
         let bound = HOLD_MAX_GRADIENT_FRACTION * S::U_MAX_T_PER_M;
