@@ -98,7 +98,11 @@ fn map_err(e: RuntimeError) -> i32 {
     match e {
         RuntimeError::NonFinite(_) => CAPSULE_MPC_ERR_NON_FINITE,
         RuntimeError::WrongLength(_) => CAPSULE_MPC_ERR_WRONG_LENGTH,
-        RuntimeError::TargetOutOfRange => CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE,
+        // Outside the workspace, or moving (targets are rest states): not
+        // a target the controller can hold.
+        RuntimeError::TargetOutOfRange
+        | RuntimeError::OutsideWorkspace { .. }
+        | RuntimeError::TargetSpeedNotZero { .. } => CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE,
         RuntimeError::BadSetting(_) => CAPSULE_MPC_ERR_BAD_SETTING,
     }
 }

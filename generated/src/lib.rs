@@ -52,6 +52,17 @@ pub struct SolveReport {
     pub max_qp_iterations: u32,
 }
 
+/// One leg of a move: the stored plan from rest at `start_offset_m`
+/// (relative positions `x - leg_target`, speeds 0) brings the capsules to
+/// rest at the leg's target. `last`: the leg ends at the final target
+/// (then `start_offset_m` is the whole displacement); otherwise its target
+/// is a waypoint, `x_start - start_offset_m`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Leg<const NX: usize> {
+    pub start_offset_m: [f64; NX],
+    pub last: bool,
+}
+
 /// What the runtime needs from a generated solver. `NX` states, plans of `K`
 /// samples. Relative states are `e = x - x_target` in SI units.
 pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
@@ -81,6 +92,10 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     const QP_MAX_ITERATIONS: usize;
     /// Bytes of table data.
     const TABLE_BYTES: usize;
+    /// Workspace: every position of a target or start lies in
+    /// [WORKSPACE_MIN_M, WORKSPACE_MAX_M], m.
+    const WORKSPACE_MIN_M: f64;
+    const WORKSPACE_MAX_M: f64;
 
     fn new() -> Self;
     fn reset(&mut self);
@@ -96,6 +111,13 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     fn plan(&self) -> &[f64; K];
     /// Whether a start at rest at relative positions `e` is covered.
     fn covers_from_rest(e: &[f64; NX]) -> bool;
+    /// The first leg from rest at displacement `d = x_start - x_target`
+    /// (positions; speeds ignored) through chained stored plans; None when
+    /// no chain gets there.
+    fn first_leg(d: &[f64; NX]) -> Option<Leg<NX>>;
+    /// Minimum rest-to-rest time of that chain (summed over its legs), s;
+    /// infinite without one.
+    fn chain_time_s(d: &[f64; NX]) -> f64;
     /// Most active-set iterations one QP took in the offline solves in the
     /// warm-start index cell of `e` (`capsule-mpc generate`); 0 when not
     /// measured or outside the index.

@@ -29,6 +29,51 @@ pub struct Config {
     pub disturbance: DisturbanceConfig,
     #[serde(default)]
     pub measurement: MeasurementConfig,
+    #[serde(default)]
+    pub workspace: WorkspaceConfig,
+}
+
+/// Where targets and starts may lie: a box in scanner coordinates, the same
+/// interval for every capsule's position. Every target inside is reached
+/// from every start inside (chaining stored plans where one is not enough).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorkspaceConfig {
+    /// Lowest position of any capsule, m.
+    pub position_min_m: f64,
+    /// Highest position of any capsule, m.
+    pub position_max_m: f64,
+}
+
+/// Default workspace half-width around the scanner's origin, m.
+pub const DEFAULT_WORKSPACE_HALF_WIDTH_M: f64 = 0.06;
+
+impl Default for WorkspaceConfig {
+    fn default() -> Self {
+        WorkspaceConfig {
+            position_min_m: -DEFAULT_WORKSPACE_HALF_WIDTH_M,
+            position_max_m: DEFAULT_WORKSPACE_HALF_WIDTH_M,
+        }
+    }
+}
+
+impl WorkspaceConfig {
+    /// Width of the box, m: the largest displacement of one capsule.
+    pub fn span_m(&self) -> f64 {
+        self.position_max_m - self.position_min_m
+    }
+
+    /// How far `position_m` lies outside the box (negative below, positive
+    /// above), or None inside.
+    pub fn excess_m(&self, position_m: f64) -> Option<f64> {
+        if position_m < self.position_min_m {
+            Some(position_m - self.position_min_m)
+        } else if position_m > self.position_max_m {
+            Some(position_m - self.position_max_m)
+        } else {
+            None
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -531,6 +576,37 @@ impl Config {
             return Err(invalid(
                 "grid.sqp_iterations",
                 format!("{} is outside [1, 500]", g.sqp_iterations),
+            ));
+        }
+
+        let w = &self.workspace;
+        check_range(
+            "workspace.position_min_m",
+            w.position_min_m,
+            -0.5,
+            false,
+            0.5,
+        )?;
+        check_range(
+            "workspace.position_max_m",
+            w.position_max_m,
+            -0.5,
+            false,
+            0.5,
+        )?;
+        if w.position_max_m <= w.position_min_m {
+            return Err(invalid(
+                "workspace.position_max_m",
+                format!(
+                    "{} must exceed workspace.position_min_m = {}",
+                    w.position_max_m, w.position_min_m
+                ),
+            ));
+        }
+        if w.span_m() / g.position_step_m > 400.0 {
+            return Err(invalid(
+                "workspace.position_max_m",
+                "the workspace spans more than 400 grid steps; use a larger grid.position_step_m",
             ));
         }
 

@@ -64,6 +64,33 @@ fn axis_tokens(name: &str, a: &Axis) -> Result<TokenStream, EmitError> {
     Ok(quote! { Axis { start: #start, step: #step, count: #count } })
 }
 
+/// The one-cell leg lattice of a controller without tables.
+fn empty_axis_for_legs() -> Axis {
+    Axis {
+        start: 0.0,
+        step: 1.0,
+        count: 1,
+    }
+}
+
+/// Infinity as a token (`f64::INFINITY`): a float literal cannot spell it.
+fn float_inf() -> TokenStream {
+    quote! { f64::INFINITY }
+}
+
+/// Times in s, where +infinity means "never" (NaN is refused).
+fn times(name: &str, vs: &[f64]) -> Result<Vec<TokenStream>, EmitError> {
+    vs.iter()
+        .map(|&v| {
+            if v == f64::INFINITY {
+                Ok(float_inf())
+            } else {
+                float(name, v).map(|l| quote! { #l })
+            }
+        })
+        .collect()
+}
+
 fn drag_arm(i: usize, drag: &Drag) -> Result<TokenStream, EmitError> {
     Ok(match *drag {
         Drag::Quadratic { b_per_m } => {
@@ -135,6 +162,8 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
     let l_v = float("l_v", switching.l_v)?;
     let x_diam = float("x_diameter", switching.x_diameter)?;
     let use_tables = input.tables.is_some();
+    let ws_min = float("workspace.position_min_m", config.workspace.position_min_m)?;
+    let ws_max = float("workspace.position_max_m", config.workspace.position_max_m)?;
 
     let spec = quote! {
         /// Dimensions, model constants and weights (SI) of this controller.
@@ -189,6 +218,10 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
             pub const L_V: f64 = #l_v;
             /// ||2 alpha||, the diameter of the state set X.
             pub const X_DIAMETER: f64 = #x_diam;
+            /// Workspace: every capsule position of a target or start lies in
+            /// [WORKSPACE_MIN_M, WORKSPACE_MAX_M], m.
+            pub const WORKSPACE_MIN_M: f64 = #ws_min;
+            pub const WORKSPACE_MAX_M: f64 = #ws_max;
             /// SHA-256 of the config this module was generated from.
             pub const CONFIG_SHA256: &str = #hash;
 
@@ -252,6 +285,20 @@ fn emit_tables(
     let plan_axis_t = axis_tokens("plan_axis", &plan_axis)?;
     let pos_axis_t = axis_tokens("index_position_axis", &pos_axis)?;
     let spd_axis_t = axis_tokens("index_speed_axis", &spd_axis)?;
+    let leg_axis = tables.map_or(empty_axis_for_legs(), |t| t.legs.axis.clone());
+    let leg_axis_t = axis_tokens("legs.axis", &leg_axis)?;
+    let (min_times, first_legs, chain_times) = match tables {
+        Some(t) => (
+            times(
+                "plan min time",
+                &t.plans.iter().map(|p| p.min_time_s).collect::<Vec<_>>(),
+            )?,
+            t.legs.first_leg.clone(),
+            times("chain time", &t.legs.chain_time_s)?,
+        ),
+        None => (Vec::new(), vec![crate::legs::NO_LEG], vec![float_inf()]),
+    };
+    let leg_cells = first_legs.len();
     let (plan_rows, reached, index): (Vec<TokenStream>, Vec<bool>, Vec<u32>) = match tables {
         Some(t) => {
             let rows = t
@@ -277,7 +324,7 @@ fn emit_tables(
     let cells = index.len();
     let expected_cells = pos_axis.count.pow(m as u32) * spd_axis.count.pow(m as u32);
     debug_assert_eq!(cells, expected_cells.max(1));
-    let table_bytes = plan_count * k * 8 + plan_count + cells * 4;
+    let table_bytes = plan_count * k * 8 + plan_count * 9 + cells * 4 + leg_cells * 10;
     let plan_count_ident = format_ident!("PLAN_COUNT");
     Ok(quote! {
         /// Offline tables: plans from rest over the relative-position grid and
@@ -300,6 +347,16 @@ fn emit_tables(
             pub static PLAN_U: [[f64; K]; PLAN_COUNT] = [#(#plan_rows),*];
             /// Whether each plan reaches its target.
             pub static PLAN_REACHED: [bool; PLAN_COUNT] = [#(#reached),*];
+            /// Minimum rest-to-rest time of each plan into the settle band
+            /// (1 mm, 5 mm/s), s; infinite where not reached.
+            pub static PLAN_MIN_TIME_S: [f64; PLAN_COUNT] = [#(#min_times),*];
+            /// Lattice of each capsule's displacement x_start - x_target, m.
+            pub const LEG_AXIS: Axis = #leg_axis_t;
+            /// Per lattice displacement: the plan of the first leg of the
+            /// fastest monotone chain (u16::MAX: none, or no displacement).
+            pub static FIRST_LEG: [u16; #leg_cells] = [#(#first_legs),*];
+            /// Per lattice displacement: the chain's summed minimum time, s.
+            pub static CHAIN_TIME_S: [f64; #leg_cells] = [#(#chain_times),*];
             /// Per index cell: plan << 16 | step offset.
             pub static INDEX: [u32; #cells] = [#(#index),*];
             /// Per index cell: most QP iterations measured offline (empty

@@ -8,6 +8,8 @@
 pub mod config;
 pub mod emit;
 pub mod generate;
+pub mod legs;
+pub mod mintime;
 pub mod model;
 pub mod ocp;
 pub mod tables;

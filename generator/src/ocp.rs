@@ -10,7 +10,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::config::Config;
-use crate::model::{rk4_capsule, Model};
+use crate::model::{rk4_capsule, CapsuleParams, CapsuleStep, Model};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus};
 use serde::{Deserialize, Serialize};
@@ -50,6 +50,9 @@ pub struct Ocp<'a> {
     pub steps: usize,
     pub position_bound_m: f64,
     pub speed_bound_m_per_s: f64,
+    /// Zero-gradient coast after every sample, s: the scanner's tracking
+    /// phase (+ delay) under constant sampling; 0 for back-to-back samples.
+    pub coast_s: f64,
 }
 
 /// A solved plan from a relative start state.
@@ -83,6 +86,38 @@ impl<'a> Ocp<'a> {
             steps,
             position_bound_m: config.controller.position_bound_m,
             speed_bound_m_per_s: config.controller.speed_bound_m_per_s,
+            coast_s: 0.0,
+        }
+    }
+
+    /// One sample of capsule `c` from `xv` at input `u`, then the coast:
+    /// the next state and the exact Jacobians of the composite map.
+    fn sample_step(&self, c: &CapsuleParams, xv: [f64; 2], u: f64) -> CapsuleStep {
+        let act = rk4_capsule(c, xv, u, self.dt_s, self.substeps);
+        if self.coast_s <= 0.0 {
+            return act;
+        }
+        // Sub-steps of the coast no longer than the actuation's.
+        let h = self.dt_s / self.substeps as f64;
+        let steps = (self.coast_s / h).ceil().max(1.0) as usize;
+        let coast = rk4_capsule(c, act.next, 0.0, self.coast_s, steps);
+        let (a, b) = (coast.a, act);
+        CapsuleStep {
+            next: coast.next,
+            a: [
+                [
+                    a[0][0] * b.a[0][0] + a[0][1] * b.a[1][0],
+                    a[0][0] * b.a[0][1] + a[0][1] * b.a[1][1],
+                ],
+                [
+                    a[1][0] * b.a[0][0] + a[1][1] * b.a[1][0],
+                    a[1][0] * b.a[0][1] + a[1][1] * b.a[1][1],
+                ],
+            ],
+            b: [
+                a[0][0] * b.b[0] + a[0][1] * b.b[1],
+                a[1][0] * b.b[0] + a[1][1] * b.b[1],
+            ],
         }
     }
 
@@ -101,7 +136,7 @@ impl<'a> Ocp<'a> {
             cost += self.stage_cost(e, uk);
             let mut next = vec![0.0; nx];
             for (i, c) in self.model.capsules.iter().enumerate() {
-                let s = rk4_capsule(c, [e[2 * i], e[2 * i + 1]], uk, self.dt_s, self.substeps);
+                let s = self.sample_step(c, [e[2 * i], e[2 * i + 1]], uk);
                 next[2 * i] = s.next[0];
                 next[2 * i + 1] = s.next[1];
             }
@@ -147,7 +182,7 @@ impl<'a> Ocp<'a> {
         for k in 0..k_steps {
             for (i, c) in self.model.capsules.iter().enumerate() {
                 let e = &states[k];
-                let step = rk4_capsule(c, [e[2 * i], e[2 * i + 1]], u[k], self.dt_s, self.substeps);
+                let step = self.sample_step(c, [e[2 * i], e[2 * i + 1]], u[k]);
                 for j in 0..k {
                     let prev = [s[k][j][2 * i], s[k][j][2 * i + 1]];
                     s[k + 1][j][2 * i] = step.a[0][0] * prev[0] + step.a[0][1] * prev[1];

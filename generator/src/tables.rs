@@ -9,6 +9,8 @@
 //! index over moving states points into the tails.
 
 use crate::config::Config;
+use crate::legs::{build_leg_table, LegTable};
+use crate::mintime::{arrival_sample, grid_min_time_plans, SETTLE_BAND};
 use crate::model::Model;
 use crate::ocp::{Ocp, Plan};
 use rand::{Rng, SeedableRng};
@@ -17,14 +19,12 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 /// Bumped whenever the table layout or its meaning changes (2: SHA-256
-/// trailer over the payload).
-pub const TABLE_FORMAT_VERSION: u32 = 2;
+/// trailer over the payload; 3: minimum-time plans and chained legs).
+pub const TABLE_FORMAT_VERSION: u32 = 3;
 /// First bytes of every table file.
 pub const TABLE_MAGIC: [u8; 8] = *b"CAPSMPC\0";
 /// Length of the SHA-256 trailer that ends every table file, bytes.
 pub const TABLE_CHECKSUM_BYTES: usize = 32;
-/// A plan "reaches" its target when its final position error is below this, m.
-pub const REACH_TOLERANCE_M: f64 = 5.0e-4;
 /// Speed half-range of the warm-start index, m/s (plans peak near 0.35 m/s).
 pub const INDEX_SPEED_RANGE_M_PER_S: f64 = 0.4;
 /// Speed step of the warm-start index, m/s.
@@ -71,7 +71,22 @@ impl Axis {
 pub struct PlanEntry {
     pub e0: Vec<f64>,
     pub plan: Plan,
+    /// Whether a minimum-time plan was found within the plan length.
     pub reached: bool,
+    /// Samples of the minimum-time plan, into [`PLAN_BAND`] (0 when not
+    /// reached); zero gradient follows up to the plan length.
+    pub arrival_samples: usize,
+    /// Minimum rest-to-rest time into the settle band (1 mm, 5 mm/s), s:
+    /// the first instant after which the minimum-time plan stays in the
+    /// band (infinite when not reached). An upper bound on the true
+    /// minimum, as every local method's is.
+    pub min_time_s: f64,
+}
+
+/// First instant (s) after which every state of `states` (one per sample)
+/// lies in the settle band.
+pub fn settle_time_s(states: &[Vec<f64>], dt_s: f64) -> f64 {
+    arrival_sample(states, &SETTLE_BAND).unwrap_or(states.len()) as f64 * dt_s
 }
 
 /// Constants of the paper's switching rule (17), computed on X x U.
@@ -111,6 +126,8 @@ pub struct Tables {
     /// Per cell (row-major over [e1, v1, e2, v2, ...]): (plan, step offset).
     pub index: Vec<(u16, u16)>,
     pub switching: SwitchingConstants,
+    /// First legs of chained plans over the workspace's displacements.
+    pub legs: LegTable,
 }
 
 /// Errors reading a table file.
@@ -215,14 +232,14 @@ impl Tables {
         Tables::from_bytes(&bytes, config)
     }
 
-    /// Number of plans that reach their target within [`REACH_TOLERANCE_M`].
+    /// Number of plans that reach their target (a minimum-time plan was found).
     pub fn reached_count(&self) -> usize {
         self.plans.iter().filter(|p| p.reached).count()
     }
 }
 
 /// Row-major multi-index of flat index `flat` over `dims`.
-fn unflatten(mut flat: usize, dims: &[usize]) -> Vec<usize> {
+pub(crate) fn unflatten(mut flat: usize, dims: &[usize]) -> Vec<usize> {
     let mut out = vec![0; dims.len()];
     for (d, &n) in dims.iter().enumerate().rev() {
         out[d] = flat % n;
@@ -231,13 +248,13 @@ fn unflatten(mut flat: usize, dims: &[usize]) -> Vec<usize> {
     out
 }
 
-fn flatten(idx: &[usize], dims: &[usize]) -> usize {
+pub(crate) fn flatten(idx: &[usize], dims: &[usize]) -> usize {
     idx.iter().zip(dims).fold(0, |acc, (&i, &n)| acc * n + i)
 }
 
 /// Deterministic starting guesses: zero input plus random piecewise-constant
 /// sequences (segments of 2-11 samples, levels in [-u_max, u_max]).
-fn starting_guesses(seed: u64, starts: usize, steps: usize, u_max: f64) -> Vec<Vec<f64>> {
+pub fn starting_guesses(seed: u64, starts: usize, steps: usize, u_max: f64) -> Vec<Vec<f64>> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut guesses = vec![vec![0.0; steps]];
     while guesses.len() < starts {
@@ -254,14 +271,6 @@ fn starting_guesses(seed: u64, starts: usize, steps: usize, u_max: f64) -> Vec<V
         guesses.push(u);
     }
     guesses
-}
-
-fn best_of(ocp: &Ocp, e0: &[f64], guesses: &[Vec<f64>], iterations: usize) -> Plan {
-    guesses
-        .iter()
-        .map(|g| ocp.solve(e0, g, iterations))
-        .min_by(|a, b| a.cost.total_cmp(&b.cost))
-        .expect("at least one guess")
 }
 
 /// Progress reporting hook (the CLI shows a progress bar).
@@ -287,79 +296,52 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
     let grid = &config.grid;
     let axis = Axis::symmetric(grid.position_range_m, grid.position_step_m);
     let dims = vec![axis.count; m];
-    let total: usize = dims.iter().product();
     let e0_of = |flat: usize| -> Vec<f64> {
         let idx = unflatten(flat, &dims);
         idx.iter().flat_map(|&i| [axis.value(i), 0.0]).collect()
     };
-    // Odd symmetry f(-x, -u) = -f(x, u): the plan for -e0 is minus the plan
-    // for e0, and the grid is symmetric, so flat index i mirrors to total-1-i.
-    let half = total.div_ceil(2);
-    progress.start("multi-start solves", half);
-    let first: Vec<Plan> = (0..half)
-        .into_par_iter()
-        .map(|flat| {
-            let guesses = starting_guesses(flat as u64, grid.starts, steps, model.u_max_t_per_m);
-            let plan = best_of(&ocp, &e0_of(flat), &guesses, grid.sqp_iterations);
-            progress.tick();
-            plan
-        })
-        .collect();
-    let mirror = |p: &Plan| Plan {
-        u: p.u.iter().map(|v| -v).collect(),
-        states: p
-            .states
-            .iter()
-            .map(|s| s.iter().map(|v| -v).collect())
-            .collect(),
-        cost: p.cost,
-        iterations: p.iterations,
-    };
-    let plan_at = |plans: &[Plan], flat: usize| -> Plan {
-        if flat < half {
-            plans[flat].clone()
-        } else {
-            mirror(&plans[total - 1 - flat])
-        }
-    };
-    // Continuation: re-solve from each neighbour's plan; keep the best.
-    progress.start("continuation from neighbours", half);
-    let second: Vec<Plan> = (0..half)
-        .into_par_iter()
-        .map(|flat| {
-            let idx = unflatten(flat, &dims);
-            let mut guesses = Vec::new();
-            for d in 0..m {
-                for delta in [-1i64, 1] {
-                    let j = idx[d] as i64 + delta;
-                    if j >= 0 && (j as usize) < axis.count {
-                        let mut n = idx.clone();
-                        n[d] = j as usize;
-                        guesses.push(plan_at(&first, flatten(&n, &dims)).u);
-                    }
-                }
-            }
-            let mut best = first[flat].clone();
-            let candidate = best_of(&ocp, &e0_of(flat), &guesses, grid.sqp_iterations);
-            if candidate.cost < best.cost {
-                best = candidate;
-            }
-            progress.tick();
-            best
-        })
-        .collect();
-    let plans: Vec<PlanEntry> = (0..total)
-        .map(|flat| {
-            let plan = plan_at(&second, flat);
-            let reached = plan.final_position_error_m() <= REACH_TOLERANCE_M;
+    let min_time = grid_min_time_plans(
+        &ocp,
+        &axis,
+        steps,
+        grid.starts,
+        grid.sqp_iterations,
+        progress,
+    );
+    let plans: Vec<PlanEntry> = min_time
+        .into_iter()
+        .enumerate()
+        .map(|(flat, found)| {
+            let e0 = e0_of(flat);
+            // The stored plan: the minimum-time inputs, then zero gradient
+            // (at rest at the target nothing moves); its cost and states
+            // under the online cost over the whole plan length.
+            let (reached, samples, mut u) = match found {
+                Some(p) => (true, p.samples, p.u),
+                None => (false, 0, Vec::new()),
+            };
+            u.resize(steps, 0.0);
+            let (states, cost) = ocp.rollout(&e0, &u);
+            let min_time_s = match reached {
+                true => settle_time_s(&states[..=samples], ocp.dt_s),
+                false => f64::INFINITY,
+            };
             PlanEntry {
-                e0: e0_of(flat),
-                plan,
+                e0,
+                plan: Plan {
+                    u,
+                    states,
+                    cost,
+                    iterations: 0,
+                },
                 reached,
+                arrival_samples: samples,
+                min_time_s,
             }
         })
         .collect();
 
+    let legs = build_leg_table(&axis, &plans, m, config.workspace.span_m());
     let index_position_axis = Axis::symmetric(
         INDEX_POSITION_MARGIN * grid.position_range_m,
         grid.position_step_m,
@@ -386,6 +368,7 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
         index_speed_axis,
         index,
         switching: switching_constants(config, &model),
+        legs,
     }
 }
 
@@ -543,6 +526,8 @@ mod tests {
                     iterations: 3,
                 },
                 reached: true,
+                arrival_samples: 2,
+                min_time_s: 0.04,
             }],
             index_position_axis: Axis::symmetric(0.01, 0.01),
             index_speed_axis: Axis::symmetric(0.1, 0.1),
@@ -552,6 +537,11 @@ mod tests {
                 l_l: 2.0,
                 l_v: 3.0,
                 x_diameter: 0.1,
+            },
+            legs: LegTable {
+                axis: Axis::symmetric(0.01, 0.01),
+                first_leg: vec![0, crate::legs::NO_LEG, 0],
+                chain_time_s: vec![0.5, 0.0, 0.5],
             },
         }
     }

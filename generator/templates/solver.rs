@@ -11,7 +11,7 @@
 
 use super::spec::*;
 use super::tables::*;
-use crate::{PlanSolver, SolveReport, SolveStatus};
+use crate::{Leg, PlanSolver, SolveReport, SolveStatus};
 
 /// Per-capsule 2x2 Jacobian (row major) and input column of one sample.
 #[derive(Debug, Clone, Copy)]
@@ -667,6 +667,80 @@ pub fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
     }
 }
 
+/// The leg lattice cell of displacement `d = x_start - x_target` (positions;
+/// speeds ignored); None outside the lattice.
+fn leg_cell(d: &[f64; NX]) -> Option<usize> {
+    let mut flat = 0usize;
+    let mut i = 0;
+    while i < M {
+        flat = flat * LEG_AXIS.count + axis_nearest(&LEG_AXIS, d[2 * i])?;
+        i += 1;
+    }
+    Some(flat)
+}
+
+/// The first leg from rest at displacement `d = x_start - x_target` toward
+/// the target (see `Leg`); None where no chain of stored plans gets there.
+/// Without tables every displacement is one direct leg.
+pub fn first_leg(d: &[f64; NX]) -> Option<Leg<NX>> {
+    let mut direct = Leg {
+        start_offset_m: [0.0; NX],
+        last: true,
+    };
+    let mut i = 0;
+    while i < M {
+        direct.start_offset_m[2 * i] = d[2 * i];
+        i += 1;
+    }
+    if !USE_TABLES {
+        return Some(direct);
+    }
+    let cell = leg_cell(d)?;
+    if CHAIN_TIME_S[cell] == 0.0 {
+        // Within half a lattice step of the target: the final leg.
+        return Some(direct);
+    }
+    let plan = FIRST_LEG[cell] as usize;
+    if plan >= PLAN_COUNT {
+        return None;
+    }
+    // The plan's grid point, and whether it is the displacement's own.
+    let mut leg = Leg {
+        start_offset_m: [0.0; NX],
+        last: true,
+    };
+    let (mut rest_plan, mut rest_cell) = (plan, cell);
+    let mut i = M;
+    while i > 0 {
+        i -= 1;
+        let offset = PLAN_AXIS.start + (rest_plan % PLAN_AXIS.count) as f64 * PLAN_AXIS.step;
+        let lattice = LEG_AXIS.start + (rest_cell % LEG_AXIS.count) as f64 * LEG_AXIS.step;
+        leg.start_offset_m[2 * i] = offset;
+        if libm::fabs(offset - lattice) > 0.5 * LEG_AXIS.step {
+            leg.last = false;
+        }
+        rest_plan /= PLAN_AXIS.count;
+        rest_cell /= LEG_AXIS.count;
+    }
+    if leg.last {
+        return Some(direct);
+    }
+    Some(leg)
+}
+
+/// Summed minimum rest-to-rest time (s) of the chain of stored plans from
+/// displacement `d` (nearest lattice point); infinite without a chain or
+/// without tables.
+pub fn chain_time_s(d: &[f64; NX]) -> f64 {
+    if !USE_TABLES {
+        return f64::INFINITY;
+    }
+    match leg_cell(d) {
+        Some(cell) => CHAIN_TIME_S[cell],
+        None => f64::INFINITY,
+    }
+}
+
 /// Fills `out` with the stored plan tail for relative state `e`; None when
 /// `e` is outside the index or its cell has no plan.
 pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
@@ -928,6 +1002,8 @@ impl PlanSolver<NX, K> for Solver {
     const SWITCHING_SIGMA: f64 = SWITCHING_SIGMA;
     const QP_MAX_ITERATIONS: usize = QP_MAX_ITERATIONS;
     const TABLE_BYTES: usize = TABLE_BYTES;
+    const WORKSPACE_MIN_M: f64 = WORKSPACE_MIN_M;
+    const WORKSPACE_MAX_M: f64 = WORKSPACE_MAX_M;
 
     fn new() -> Self {
         Solver::new()
@@ -952,6 +1028,12 @@ impl PlanSolver<NX, K> for Solver {
     }
     fn covers_from_rest(e: &[f64; NX]) -> bool {
         Solver::covers_from_rest(e)
+    }
+    fn first_leg(d: &[f64; NX]) -> Option<Leg<NX>> {
+        first_leg(d)
+    }
+    fn chain_time_s(d: &[f64; NX]) -> f64 {
+        chain_time_s(d)
     }
     fn stage_cost(e: &[f64; NX], u: f64) -> f64 {
         stage_cost(e, u)

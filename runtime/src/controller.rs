@@ -2,7 +2,7 @@
 //! rule + fault handling, in one fixed-size struct.
 
 use crate::estimator::{CapsuleFilter, REACQUIRE_SPEED_STD_M_PER_S};
-use crate::generated::{PlanSolver, SolveReport, SolveStatus};
+use crate::generated::{Leg, PlanSolver, SolveReport, SolveStatus};
 use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
     PaperConstants, TightInputs,
@@ -109,6 +109,15 @@ pub const HOLD_MAX_GRADIENT_FRACTION: f64 = 0.25;
 /// far likelier a wrong estimate than wrong data.
 pub const REACQUIRE_AFTER_REJECTIONS: usize = 5;
 
+/// A waypoint counts as reached when every position is within this of it, m
+/// (the next leg's plan absorbs the residual).
+pub const WAYPOINT_POSITION_M: f64 = 2.0e-3;
+/// ... and every speed below this, m/s.
+pub const WAYPOINT_SPEED_M_PER_S: f64 = 20.0e-3;
+/// Braking outside the tables re-plans the legs once every speed is below
+/// this, m/s (the stored plans start at rest).
+pub const REPLAN_SPEED_M_PER_S: f64 = 20.0e-3;
+
 /// Normalized innovation squared above which a measurement is rejected
 /// (10 sigma: only gross outliers and wrong data).
 pub const MEASUREMENT_GATE_NIS: f64 = 100.0;
@@ -152,15 +161,26 @@ pub enum RuntimeStatus {
 }
 
 /// Errors of calls with bad arguments (nothing changes when one is returned).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum RuntimeError {
     /// A value was NaN or infinite; names the argument.
     NonFinite(&'static str),
     /// A slice had the wrong length; names the argument.
     WrongLength(&'static str),
     /// The target cannot be reached from the current state with the stored
-    /// plans (outside the tables' range).
+    /// plans, even chained (only when the estimate lies outside the
+    /// workspace the tables were made for).
     TargetOutOfRange,
+    /// A position lies outside the workspace `[S::WORKSPACE_MIN_M,
+    /// S::WORKSPACE_MAX_M]`: names the argument, the capsule (0-based) and
+    /// by how much (m; negative below the box, positive above).
+    OutsideWorkspace {
+        argument: &'static str,
+        capsule: usize,
+        excess_m: f64,
+    },
+    /// A target speed is not zero: targets are rest states.
+    TargetSpeedNotZero { capsule: usize },
     /// A setting is out of its range; names it.
     BadSetting(&'static str),
 }
@@ -187,7 +207,13 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     solver: S,
     settings: ControllerSettings,
     filters: [CapsuleFilter; NX],
+    /// Target of the current leg (the final target on the last leg, else
+    /// a waypoint), absolute SI.
     target: [f64; NX],
+    /// Where the capsules are to end, absolute SI.
+    final_target: [f64; NX],
+    /// Whether the current leg ends at `final_target`.
+    on_last_leg: bool,
     has_target: bool,
     /// Plan samples applied since the last solve.
     applied_samples: usize,
@@ -234,6 +260,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             settings,
             filters: [CapsuleFilter::new(0.0, 0.0); NX],
             target: [0.0; NX],
+            final_target: [0.0; NX],
+            on_last_leg: true,
             has_target: false,
             applied_samples: 0,
             last_cost: f64::INFINITY,
@@ -305,8 +333,20 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         &self.settings
     }
 
+    /// The final target, when set.
     pub fn target(&self) -> Option<&[f64; NX]> {
+        self.has_target.then_some(&self.final_target)
+    }
+
+    /// The current leg's target: the final target on the last leg, else the
+    /// waypoint the capsules are heading for.
+    pub fn leg_target(&self) -> Option<&[f64; NX]> {
         self.has_target.then_some(&self.target)
+    }
+
+    /// Whether the current leg ends at the final target.
+    pub fn on_last_leg(&self) -> bool {
+        self.on_last_leg
     }
 
     /// The current state estimate (absolute, SI).
@@ -324,20 +364,77 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         (capsule < NX / 2).then(|| &self.filters[capsule])
     }
 
-    /// Sets a new target `[x1, v1, x2, v2, ...]` (speeds should be 0). The
-    /// plan restarts; refused when the stored plans do not cover it.
+    /// Sets a new target `[x1, v1, x2, v2, ...]`: positions inside the
+    /// workspace, speeds 0. Reached from wherever the capsules are, through
+    /// waypoints when one stored plan does not reach (see [`Leg`]); the
+    /// plan restarts.
     pub fn set_target(&mut self, target: &[f64; NX]) -> Result<(), RuntimeError> {
         if target.iter().any(|v| !v.is_finite()) {
             return Err(RuntimeError::NonFinite("target"));
         }
-        let e = self.relative(&self.estimate(), target);
-        if !S::covers_from_rest(&e) {
-            return Err(RuntimeError::TargetOutOfRange);
+        if let Some(capsule) = (0..NX / 2).find(|&i| target[2 * i + 1] != 0.0) {
+            return Err(RuntimeError::TargetSpeedNotZero { capsule });
         }
-        self.target = *target;
+        check_workspace::<S, NX, K>("target", target, 2)?;
+        let x = self.estimate();
+        let leg = Self::leg_from(&x, target).ok_or(RuntimeError::TargetOutOfRange)?;
+        self.final_target = *target;
         self.has_target = true;
+        self.apply_leg(&x, &leg);
         self.restart_plan();
         Ok(())
+    }
+
+    /// The next leg from the capsules' positions in `x` to `target`.
+    fn leg_from(x: &[f64; NX], target: &[f64; NX]) -> Option<Leg<NX>> {
+        let mut d = [0.0; NX];
+        for i in 0..NX / 2 {
+            d[2 * i] = x[2 * i] - target[2 * i];
+        }
+        S::first_leg(&d)
+    }
+
+    /// Heads for the end of `leg`, starting from `x`.
+    fn apply_leg(&mut self, x: &[f64; NX], leg: &Leg<NX>) {
+        self.on_last_leg = leg.last;
+        if leg.last {
+            self.target = self.final_target;
+        } else {
+            for i in 0..NX / 2 {
+                self.target[2 * i] = x[2 * i] - leg.start_offset_m[2 * i];
+                self.target[2 * i + 1] = 0.0;
+            }
+        }
+    }
+
+    /// On a waypoint leg: once the capsules are near the waypoint, nearly at
+    /// rest, head for the next leg (true when the leg changed).
+    fn advance_leg(&mut self, x: &[f64; NX]) -> bool {
+        if self.on_last_leg {
+            return false;
+        }
+        let e = self.relative(x, &self.target);
+        let arrived = (0..NX / 2).all(|i| {
+            libm::fabs(e[2 * i]) <= WAYPOINT_POSITION_M
+                && libm::fabs(e[2 * i + 1]) <= WAYPOINT_SPEED_M_PER_S
+        });
+        if !arrived {
+            return false;
+        }
+        self.replan_legs(x)
+    }
+
+    /// Re-plans the legs from the capsules' positions in `x` (true when a
+    /// chain exists; else the current leg is kept).
+    fn replan_legs(&mut self, x: &[f64; NX]) -> bool {
+        match Self::leg_from(x, &self.final_target) {
+            Some(leg) => {
+                self.apply_leg(x, &leg);
+                self.restart_plan();
+                true
+            }
+            None => false,
+        }
     }
 
     fn relative(&self, x: &[f64; NX], target: &[f64; NX]) -> [f64; NX] {
@@ -486,8 +583,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             out.status = RuntimeStatus::NoTarget;
             return out;
         }
+        self.advance_leg(x);
         let e = self.relative(x, &self.target);
-        if self.update_hold(&e) {
+        if self.on_last_leg && self.update_hold(&e) {
             out.gradients_t_per_m[0] = self.hold_gradient(&e);
             self.applied_samples = 0;
             return out;
@@ -500,6 +598,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             out.status = RuntimeStatus::Fallback;
             self.applied_samples = 0;
             self.solver.reset();
+            // Outside the tables (e.g. a new target while moving fast):
+            // brake, and once nearly at rest head for the legs from here.
+            if (0..NX / 2).all(|i| libm::fabs(x[2 * i + 1]) <= REPLAN_SPEED_M_PER_S) {
+                self.replan_legs(x);
+            }
             return out;
         }
         if report.status == SolveStatus::IterationLimit && out.status == RuntimeStatus::Ok {
@@ -735,6 +838,30 @@ fn mean_gradient_gain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>() -
         mean_g += next[1] / (1.0e-3 * S::DT_S) / m as f64;
     }
     mean_g
+}
+
+/// Positions of `x` (every `stride`-th entry: 1 for positions only, 2 for
+/// a full state) must lie in the solver's workspace.
+pub fn check_workspace<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    argument: &'static str,
+    x: &[f64],
+    stride: usize,
+) -> Result<(), RuntimeError> {
+    for (capsule, &p) in x.iter().step_by(stride).enumerate() {
+        let excess_m = if p < S::WORKSPACE_MIN_M {
+            p - S::WORKSPACE_MIN_M
+        } else if p > S::WORKSPACE_MAX_M {
+            p - S::WORKSPACE_MAX_M
+        } else {
+            continue;
+        };
+        return Err(RuntimeError::OutsideWorkspace {
+            argument,
+            capsule,
+            excess_m,
+        });
+    }
+    Ok(())
 }
 
 /// Every name `RuntimeError::BadSetting` can carry (the settings that are

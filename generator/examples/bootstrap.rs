@@ -1,0 +1,69 @@
+//! Generates the solver crate with the generator alone, for when the
+//! template's interface changed and the `capsule-mpc` binary (which links
+//! the old generated crate) cannot be built:
+//!
+//!     cargo run --release -p capsule-mpc-generator --example bootstrap [CONFIG] [OUT]
+//!
+//! then `cargo build --release` and `capsule-mpc generate --reuse-tables`
+//! to measure the QP iteration map.
+
+use capsule_mpc_generator::config::Config;
+use capsule_mpc_generator::generate::{generate, write_atomically};
+use capsule_mpc_generator::tables::Progress;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// Prints each phase and every tenth of its progress.
+struct Log {
+    done: AtomicUsize,
+    total: AtomicUsize,
+    started: Instant,
+}
+
+impl Progress for Log {
+    fn start(&self, phase: &str, total: usize) {
+        self.done.store(0, Ordering::Relaxed);
+        self.total.store(total, Ordering::Relaxed);
+        eprintln!(
+            "{:7.1} s  {phase}: {total}",
+            self.started.elapsed().as_secs_f64()
+        );
+    }
+    fn tick(&self) {
+        let done = self.done.fetch_add(1, Ordering::Relaxed) + 1;
+        let total = self.total.load(Ordering::Relaxed).max(1);
+        if done * 10 / total != (done - 1) * 10 / total {
+            eprintln!(
+                "{:7.1} s    {done}/{total}",
+                self.started.elapsed().as_secs_f64()
+            );
+        }
+    }
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let config = match args.next() {
+        Some(path) => Config::from_file(std::path::Path::new(&path))?,
+        None => Config::embedded_default(),
+    };
+    let out = PathBuf::from(args.next().unwrap_or_else(|| "generated".to_string()));
+    let log = Log {
+        done: AtomicUsize::new(0),
+        total: AtomicUsize::new(0),
+        started: Instant::now(),
+    };
+    let files = generate(&config, &log)?;
+    write_atomically(&out, &files)?;
+    let t = &files.tables;
+    println!(
+        "generated {} in {:.1} s: {} plans ({} reached), {} index cells",
+        out.display(),
+        log.started.elapsed().as_secs_f64(),
+        t.plans.len(),
+        t.reached_count(),
+        t.index.len()
+    );
+    Ok(())
+}
