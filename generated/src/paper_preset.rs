@@ -106,7 +106,7 @@ pub mod tables {
         count: 1usize,
     };
     /// Bytes of table data in this module.
-    pub const TABLE_BYTES: usize = 14usize;
+    pub const TABLE_BYTES: usize = 18usize;
     /// Gradient plans, T/m.
     pub static PLAN_U: [[f64; K]; PLAN_COUNT] = [];
     /// Whether each plan reaches its target.
@@ -127,6 +127,11 @@ pub mod tables {
     pub static CHAIN_TIME_S: [f64; 1usize] = [f64::INFINITY];
     /// Per index cell: plan << 16 | step offset.
     pub static INDEX: [u32; 1usize] = [4294967295u32];
+    /// Constant sampling's tables: the same grid, plans solved with
+    /// a zero-gradient coast of COAST_S after every sample.
+    pub const COAST_S: f64 = 0.0;
+    pub static COASTED_PLAN_U: [[f64; K]; PLAN_COUNT] = [];
+    pub static COASTED_INDEX: [u32; 1usize] = [4294967295u32];
     /// Per index cell: most QP iterations measured offline (empty
     /// when not measured; see `qp_iteration_map.rs`).
     pub static QP_ITERATION_MAP: &[u8] = crate::qp_iteration_map::PAPER_PRESET;
@@ -221,6 +226,12 @@ pub mod solver {
                 coast_h_s: c / steps as f64,
             }
         }
+        /// One sample per phase with a coast after it: constant sampling's
+        /// schedule, which has tables of its own.
+        #[inline]
+        fn coasted(&self) -> bool {
+            self.coast_steps > 0 && self.samples_per_phase == 1
+        }
         /// Whether a coast follows plan sample `k`.
         #[inline]
         fn coasts_after(&self, k: usize) -> bool {
@@ -314,7 +325,7 @@ pub mod solver {
                 f64::INFINITY
             };
             if USE_TABLES {
-                match lookup_tail(e, &mut self.candidate) {
+                match lookup_tail_for(e, &mut self.candidate, self.schedule.coasted()) {
                     Some(()) => {
                         let c = rollout_cost_below(
                             e,
@@ -841,11 +852,25 @@ pub mod solver {
             None => f64::INFINITY,
         }
     }
-    /// Fills `out` with the stored plan tail for relative state `e`; None when
-    /// `e` is outside the index or its cell has no plan.
+    /// Fills `out` with the stored plan tail for relative state `e` from the
+    /// back-to-back tables; None when `e` is outside the index or its cell has
+    /// no plan.
     pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
+        lookup_tail_for(e, out, false)
+    }
+    /// As `lookup_tail`, from the tables solved for one sample per actuation
+    /// phase followed by the coast `COAST_S` (constant sampling) when `coasted`.
+    pub fn lookup_tail_for(
+        e: &[f64; NX],
+        out: &mut [f64; K],
+        coasted: bool,
+    ) -> Option<()> {
         let flat = index_cell(e)?;
-        let cell = INDEX[flat];
+        let (cell, plans) = if coasted {
+            (COASTED_INDEX[flat], &COASTED_PLAN_U)
+        } else {
+            (INDEX[flat], &PLAN_U)
+        };
         let plan = (cell >> 16) as usize;
         let offset = (cell & 0xffff) as usize;
         if plan >= PLAN_COUNT {
@@ -853,7 +878,7 @@ pub mod solver {
         }
         let mut i = 0;
         while i < K {
-            out[i] = if offset + i < K { PLAN_U[plan][offset + i] } else { 0.0 };
+            out[i] = if offset + i < K { plans[plan][offset + i] } else { 0.0 };
             i += 1;
         }
         Some(())

@@ -299,6 +299,25 @@ fn emit_tables(
         None => (Vec::new(), vec![crate::legs::NO_LEG], vec![float_inf()]),
     };
     let leg_cells = first_legs.len();
+    let (coast_s, coasted_rows, coasted_index) = match tables {
+        Some(t) => (
+            float("coasted.coast_s", t.coasted.coast_s)?,
+            t.coasted
+                .plans
+                .iter()
+                .map(|p| {
+                    let us = floats("coasted plan u", &p.plan.u)?;
+                    Ok(quote! { [#(#us),*] })
+                })
+                .collect::<Result<Vec<_>, EmitError>>()?,
+            t.coasted
+                .index
+                .iter()
+                .map(|&(plan, offset)| ((plan as u32) << 16) | offset as u32)
+                .collect::<Vec<u32>>(),
+        ),
+        None => (float("coast_s", 0.0)?, Vec::new(), vec![u32::MAX]),
+    };
     let (plan_rows, reached, index): (Vec<TokenStream>, Vec<bool>, Vec<u32>) = match tables {
         Some(t) => {
             let rows = t
@@ -324,7 +343,7 @@ fn emit_tables(
     let cells = index.len();
     let expected_cells = pos_axis.count.pow(m as u32) * spd_axis.count.pow(m as u32);
     debug_assert_eq!(cells, expected_cells.max(1));
-    let table_bytes = plan_count * k * 8 + plan_count * 9 + cells * 4 + leg_cells * 10;
+    let table_bytes = 2 * (plan_count * k * 8 + cells * 4) + plan_count * 9 + leg_cells * 10;
     let plan_count_ident = format_ident!("PLAN_COUNT");
     Ok(quote! {
         /// Offline tables: plans from rest over the relative-position grid and
@@ -359,6 +378,11 @@ fn emit_tables(
             pub static CHAIN_TIME_S: [f64; #leg_cells] = [#(#chain_times),*];
             /// Per index cell: plan << 16 | step offset.
             pub static INDEX: [u32; #cells] = [#(#index),*];
+            /// Constant sampling's tables: the same grid, plans solved with
+            /// a zero-gradient coast of COAST_S after every sample.
+            pub const COAST_S: f64 = #coast_s;
+            pub static COASTED_PLAN_U: [[f64; K]; PLAN_COUNT] = [#(#coasted_rows),*];
+            pub static COASTED_INDEX: [u32; #cells] = [#(#coasted_index),*];
             /// Per index cell: most QP iterations measured offline (empty
             /// when not measured; see `qp_iteration_map.rs`).
             pub static QP_ITERATION_MAP: &[u8] = crate::qp_iteration_map::#qp_map;

@@ -128,6 +128,19 @@ pub struct Tables {
     pub switching: SwitchingConstants,
     /// First legs of chained plans over the workspace's displacements.
     pub legs: LegTable,
+    /// Plans and index for constant sampling (a coast after every sample).
+    pub coasted: CoastedTables,
+}
+
+/// Tables for one sample per actuation phase followed by a zero-gradient
+/// coast (constant sampling): same grid and index axes as the back-to-back
+/// tables.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CoastedTables {
+    /// The coast after every sample, s (tracking time + extra delay).
+    pub coast_s: f64,
+    pub plans: Vec<PlanEntry>,
+    pub index: Vec<(u16, u16)>,
 }
 
 /// Errors reading a table file.
@@ -300,46 +313,16 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
         let idx = unflatten(flat, &dims);
         idx.iter().flat_map(|&i| [axis.value(i), 0.0]).collect()
     };
-    let min_time = grid_min_time_plans(
-        &ocp,
-        &axis,
-        steps,
-        grid.starts,
-        grid.sqp_iterations,
-        progress,
-    );
-    let plans: Vec<PlanEntry> = min_time
-        .into_iter()
-        .enumerate()
-        .map(|(flat, found)| {
-            let e0 = e0_of(flat);
-            // The stored plan: the minimum-time inputs, then zero gradient
-            // (at rest at the target nothing moves); its cost and states
-            // under the online cost over the whole plan length.
-            let (reached, samples, mut u) = match found {
-                Some(p) => (true, p.samples, p.u),
-                None => (false, 0, Vec::new()),
-            };
-            u.resize(steps, 0.0);
-            let (states, cost) = ocp.rollout(&e0, &u);
-            let min_time_s = match reached {
-                true => settle_time_s(&states[..=samples], ocp.dt_s),
-                false => f64::INFINITY,
-            };
-            PlanEntry {
-                e0,
-                plan: Plan {
-                    u,
-                    states,
-                    cost,
-                    iterations: 0,
-                },
-                reached,
-                arrival_samples: samples,
-                min_time_s,
-            }
-        })
-        .collect();
+    let plans = schedule_plans(&ocp, &axis, &e0_of, grid, progress);
+    // Constant sampling plays one sample, then tracks (u = 0) for the
+    // tracking time + delay: back-to-back plans, played that way, miss
+    // their targets by centimetres, so that schedule has plans of its own.
+    let coast_s = config.scanner.tracking_time_s + config.scanner.extra_delay_s;
+    let coasted_ocp = Ocp {
+        coast_s,
+        ..ocp.clone()
+    };
+    let coasted_plans = schedule_plans(&coasted_ocp, &axis, &e0_of, grid, progress);
 
     let legs = build_leg_table(&axis, &plans, m, config.workspace.span_m());
     let index_position_axis = Axis::symmetric(
@@ -350,6 +333,13 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
     let index = build_index(
         &ocp,
         &plans,
+        &index_position_axis,
+        &index_speed_axis,
+        progress,
+    );
+    let coasted_index = build_index(
+        &coasted_ocp,
+        &coasted_plans,
         &index_position_axis,
         &index_speed_axis,
         progress,
@@ -369,7 +359,58 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
         index,
         switching: switching_constants(config, &model),
         legs,
+        coasted: CoastedTables {
+            coast_s,
+            plans: coasted_plans,
+            index: coasted_index,
+        },
     }
+}
+
+/// Minimum-time plans over the grid for the schedule `ocp` models, padded
+/// with zero gradient to the plan length, with their states and cost
+/// under the online cost.
+fn schedule_plans(
+    ocp: &Ocp,
+    axis: &Axis,
+    e0_of: &dyn Fn(usize) -> Vec<f64>,
+    grid: &crate::config::GridConfig,
+    progress: &dyn Progress,
+) -> Vec<PlanEntry> {
+    let steps = ocp.steps;
+    let min_time =
+        grid_min_time_plans(ocp, axis, steps, grid.starts, grid.sqp_iterations, progress);
+    // Wall time per plan sample: the sample and the coast after it.
+    let sample_period_s = ocp.dt_s + ocp.coast_s;
+    min_time
+        .into_iter()
+        .enumerate()
+        .map(|(flat, found)| {
+            let e0 = e0_of(flat);
+            let (reached, samples, mut u) = match found {
+                Some(p) => (true, p.samples, p.u),
+                None => (false, 0, Vec::new()),
+            };
+            u.resize(steps, 0.0);
+            let (states, cost) = ocp.rollout(&e0, &u);
+            let min_time_s = match reached {
+                true => settle_time_s(&states[..=samples], sample_period_s),
+                false => f64::INFINITY,
+            };
+            PlanEntry {
+                e0,
+                plan: Plan {
+                    u,
+                    states,
+                    cost,
+                    iterations: 0,
+                },
+                reached,
+                arrival_samples: samples,
+                min_time_s,
+            }
+        })
+        .collect()
 }
 
 /// For every index cell, the stored plan sample whose tail, rolled out from
@@ -542,6 +583,11 @@ mod tests {
                 axis: Axis::symmetric(0.01, 0.01),
                 first_leg: vec![0, crate::legs::NO_LEG, 0],
                 chain_time_s: vec![0.5, 0.0, 0.5],
+            },
+            coasted: CoastedTables {
+                coast_s: 0.02,
+                plans: Vec::new(),
+                index: vec![(u16::MAX, 0)],
             },
         }
     }

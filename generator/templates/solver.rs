@@ -96,6 +96,13 @@ impl Schedule {
         }
     }
 
+    /// One sample per phase with a coast after it: constant sampling's
+    /// schedule, which has tables of its own.
+    #[inline]
+    fn coasted(&self) -> bool {
+        self.coast_steps > 0 && self.samples_per_phase == 1
+    }
+
     /// Whether a coast follows plan sample `k`.
     #[inline]
     fn coasts_after(&self, k: usize) -> bool {
@@ -194,7 +201,7 @@ impl Solver {
             f64::INFINITY
         };
         if USE_TABLES {
-            match lookup_tail(e, &mut self.candidate) {
+            match lookup_tail_for(e, &mut self.candidate, self.schedule.coasted()) {
                 Some(()) => {
                     let c = rollout_cost_below(e, &self.candidate, &self.schedule, cost);
                     if c < cost {
@@ -741,11 +748,22 @@ pub fn chain_time_s(d: &[f64; NX]) -> f64 {
     }
 }
 
-/// Fills `out` with the stored plan tail for relative state `e`; None when
-/// `e` is outside the index or its cell has no plan.
+/// Fills `out` with the stored plan tail for relative state `e` from the
+/// back-to-back tables; None when `e` is outside the index or its cell has
+/// no plan.
 pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
+    lookup_tail_for(e, out, false)
+}
+
+/// As `lookup_tail`, from the tables solved for one sample per actuation
+/// phase followed by the coast `COAST_S` (constant sampling) when `coasted`.
+pub fn lookup_tail_for(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
     let flat = index_cell(e)?;
-    let cell = INDEX[flat];
+    let (cell, plans) = if coasted {
+        (COASTED_INDEX[flat], &COASTED_PLAN_U)
+    } else {
+        (INDEX[flat], &PLAN_U)
+    };
     let plan = (cell >> 16) as usize;
     let offset = (cell & 0xffff) as usize;
     if plan >= PLAN_COUNT {
@@ -754,7 +772,7 @@ pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
     let mut i = 0;
     while i < K {
         out[i] = if offset + i < K {
-            PLAN_U[plan][offset + i]
+            plans[plan][offset + i]
         } else {
             0.0
         };
