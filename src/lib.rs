@@ -9,7 +9,7 @@
 //! * [`cli`]: the arguments of every subcommand (clap);
 //! * [`cmd`]: one thin module per subcommand (`inspect`, `simulate`,
 //!   `generate`, `bench`, `figures`);
-//! * [`bench`]: timing of the online step and the peer solvers (clarabel,
+//! * [`bench`](mod@bench): timing of the online step and the peer solvers (clarabel,
 //!   OSQP, OpEn) on the same states;
 //! * [`figures`]: the report's figures and the plot of one run (plotters).
 

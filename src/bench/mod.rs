@@ -46,12 +46,15 @@
 //! the tail fixed, the exact gradient by the adjoint of the RK4 Jacobians.
 //! All peers start from the same state and plan as the warm step above.
 //!
+//! [`RefSolver`]: reference::RefSolver
+//! [`solver::BoxQp`]: capsule_mpc_runtime::generated::controller::solver::BoxQp
+//!
 //! # Layout
 //!
 //! [`states`] draws the states, [`timing`] holds the timer and percentiles,
 //! [`harness`] times the controller step and the solver and prints the
-//! tables, [`reference`] is the reference refinement loop with its
-//! active-set engine, [`peers`] runs the peers ([`clarabel_peer`],
+//! tables, [`reference`](mod@reference) is the reference refinement loop
+//! with its active-set engine, [`peers`] runs the peers ([`clarabel_peer`],
 //! `osqp_peer` with feature `peers-osqp`, [`open_peer`]) on the warm case.
 
 // Index loops mirror the math (S[k][j], H[a][b]), as in the template.
