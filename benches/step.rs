@@ -4,7 +4,8 @@
 //! of `capsule-mpc bench` (a first solve, `shift(1)`, the predicted next
 //! state), on states of scenario C's closed loop and one uniform state.
 
-use capsule_mpc::bench::{prototype_controller, ActiveSetEngine, QpEngine, RefProblem, RefSolver};
+use capsule_mpc::bench::harness::prototype_controller;
+use capsule_mpc::bench::reference::{ActiveSetEngine, QpEngine, RefProblem, RefSolver};
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_runtime::generated::controller::{solver, spec};
 use criterion::{black_box, criterion_group, criterion_main, BatchSize, Criterion};

@@ -1,9 +1,10 @@
 //! Command-line arguments of `capsule-mpc`, as plain structs so that the
 //! modules implementing each subcommand can take them without clap plumbing.
 
-use crate::plant::DisturbanceLevel;
 use anyhow::{bail, Result};
 use capsule_mpc_generator::config::{Config, ConfigError};
+use capsule_mpc_sim::closed_loop::{Preset, Sampling, Scenario};
+use capsule_mpc_sim::plant::DisturbanceLevel;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 
@@ -42,9 +43,9 @@ pub struct InspectArgs {
     pub json: bool,
 }
 
-/// Reference scenarios of the paper (targets in cm, see NOTES.md).
+/// Reference scenario on the command line (see [`Scenario`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Scenario {
+pub enum ScenarioArg {
     /// Both capsules the same way: (2 cm, 0, 3 cm, 0).
     #[value(name = "A", alias = "a")]
     A,
@@ -53,27 +54,18 @@ pub enum Scenario {
     C,
 }
 
-impl Scenario {
-    /// Target state [x1, v1, x2, v2] in m and m/s.
-    pub fn target_state(self) -> Vec<f64> {
-        match self {
-            Scenario::A => vec![0.02, 0.0, 0.03, 0.0],
-            Scenario::C => vec![0.02, 0.0, -0.01, 0.0],
-        }
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Scenario::A => "A",
-            Scenario::C => "C",
+impl From<ScenarioArg> for Scenario {
+    fn from(s: ScenarioArg) -> Self {
+        match s {
+            ScenarioArg::A => Scenario::A,
+            ScenarioArg::C => Scenario::C,
         }
     }
 }
 
-/// When the controller gets measurements and may actuate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Sampling {
+/// Sampling mode on the command line (see [`Sampling`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SamplingArg {
     /// Exact state every sample, no tracking time (an upper bound on quality).
     Ideal,
     /// Track, then actuate for a fixed time, every period.
@@ -82,22 +74,51 @@ pub enum Sampling {
     Variable,
 }
 
-impl Sampling {
-    /// The runtime's sampling mode.
-    pub fn runtime(self) -> capsule_mpc_runtime::controller::Sampling {
-        use capsule_mpc_runtime::controller::Sampling as Rt;
-        match self {
-            Sampling::Ideal => Rt::Ideal,
-            Sampling::Constant => Rt::Constant,
-            Sampling::Variable => Rt::Variable,
+impl From<SamplingArg> for Sampling {
+    fn from(s: SamplingArg) -> Self {
+        match s {
+            SamplingArg::Ideal => Sampling::Ideal,
+            SamplingArg::Constant => Sampling::Constant,
+            SamplingArg::Variable => Sampling::Variable,
         }
     }
+}
 
-    pub fn name(self) -> &'static str {
-        match self {
-            Sampling::Ideal => "ideal",
-            Sampling::Constant => "constant",
-            Sampling::Variable => "variable",
+/// Disturbance level on the command line (see [`DisturbanceLevel`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DisturbanceArg {
+    /// No disturbance.
+    None,
+    /// The paper's ||d|| <= 0.05 (cm units), random.
+    Paper,
+    /// 5 % of the first capsule's full magnetic acceleration, random.
+    Stress,
+}
+
+impl From<DisturbanceArg> for DisturbanceLevel {
+    fn from(d: DisturbanceArg) -> Self {
+        match d {
+            DisturbanceArg::None => DisturbanceLevel::None,
+            DisturbanceArg::Paper => DisturbanceLevel::Paper,
+            DisturbanceArg::Stress => DisturbanceLevel::Stress,
+        }
+    }
+}
+
+/// Generated controller on the command line (see [`Preset`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PresetArg {
+    /// Offline plan tables + online refinement (the product).
+    Default,
+    /// The paper's NMPC taken literally (N = 10, Table I weights).
+    Paper,
+}
+
+impl From<PresetArg> for Preset {
+    fn from(p: PresetArg) -> Self {
+        match p {
+            PresetArg::Default => Preset::Default,
+            PresetArg::Paper => Preset::Paper,
         }
     }
 }
@@ -109,7 +130,7 @@ pub struct SimulateArgs {
     pub config: Option<PathBuf>,
     /// Reference scenario (default A).
     #[arg(long, value_enum, conflicts_with = "target")]
-    pub scenario: Option<Scenario>,
+    pub scenario: Option<ScenarioArg>,
     /// Explicit target state x1,v1,x2,v2,... in m and m/s.
     #[arg(
         long,
@@ -119,9 +140,9 @@ pub struct SimulateArgs {
     )]
     pub target: Option<Vec<f64>>,
     #[arg(long, value_enum, default_value = "variable")]
-    pub sampling: Sampling,
+    pub sampling: SamplingArg,
     #[arg(long, value_enum, default_value = "paper")]
-    pub disturbance: DisturbanceLevel,
+    pub disturbance: DisturbanceArg,
     /// Seed of the disturbance and the measurement noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -136,7 +157,7 @@ pub struct SimulateArgs {
     pub plot: Option<PathBuf>,
     /// Which generated controller: the product's (`default`) or the paper's NMPC.
     #[arg(long, value_enum, default_value = "default")]
-    pub preset: crate::closed_loop::Preset,
+    pub preset: PresetArg,
     /// Switching rule for `--sampling variable`.
     #[arg(long, value_enum, default_value = "tight")]
     pub switching: SwitchingArg,
@@ -161,7 +182,10 @@ impl SimulateArgs {
     pub fn target_state(&self, state_count: usize) -> Result<Vec<f64>> {
         let target = match &self.target {
             Some(t) => t.clone(),
-            None => self.scenario.unwrap_or(Scenario::A).target_state(),
+            None => self
+                .scenario
+                .map_or(Scenario::A, Scenario::from)
+                .target_state(),
         };
         if target.len() != state_count {
             bail!(
@@ -179,7 +203,7 @@ impl SimulateArgs {
     pub fn scenario_name(&self) -> &'static str {
         match (&self.target, self.scenario) {
             (Some(_), _) => "custom",
-            (None, s) => s.unwrap_or(Scenario::A).name(),
+            (None, s) => s.map_or(Scenario::A, Scenario::from).name(),
         }
     }
 }
@@ -217,8 +241,8 @@ pub struct BenchArgs {
     /// coast) or variable (phases of up to N samples; one cycle refines the
     /// plan once per sample of its phase). The peers always solve the ideal
     /// problem.
-    #[arg(long, value_enum, default_value_t = Sampling::Ideal)]
-    pub sampling: Sampling,
+    #[arg(long, value_enum, default_value_t = SamplingArg::Ideal)]
+    pub sampling: SamplingArg,
     /// Write the timings (JSON) here.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,

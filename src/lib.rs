@@ -1,13 +1,19 @@
-//! capsule-mpc: closed-loop simulation, metrics and reports around the
-//! generated MPC solver.
+//! capsule-mpc: the command line of the product, and the two tools that
+//! need more than the simulation library.
+//!
+//! Steering several magnetic capsules with one MRI gradient is done by the
+//! generated solver and the `no_std` runtime; `capsule_mpc_sim` runs that
+//! controller in closed loop against a simulated plant. This crate is the
+//! shell around them:
+//!
+//! * [`cli`]: the arguments of every subcommand (clap);
+//! * [`cmd`]: one thin module per subcommand (`inspect`, `simulate`,
+//!   `generate`, `bench`, `figures`);
+//! * [`bench`](mod@bench): timing of the online step and the peer solvers (clarabel,
+//!   OSQP, OpEn) on the same states;
+//! * [`figures`]: the report's figures and the plot of one run (plotters).
 
 pub mod bench;
 pub mod cli;
-pub mod closed_loop;
+pub mod cmd;
 pub mod figures;
-pub mod generate_cmd;
-pub mod inspect;
-pub mod metrics;
-pub mod plant;
-pub mod qp_map;
-pub mod report;

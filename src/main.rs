@@ -5,6 +5,7 @@
 //! panic or a backtrace.
 
 use capsule_mpc::cli::{Cli, Command};
+use capsule_mpc::cmd;
 use clap::Parser;
 use std::process::ExitCode;
 
@@ -38,26 +39,12 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Inspect(args) => {
             let stdout = std::io::stdout();
-            capsule_mpc::inspect::run(&args, &mut stdout.lock())?;
-            Ok(ExitCode::SUCCESS)
+            cmd::inspect::run(&args, &mut stdout.lock())?;
         }
-        Command::Simulate(args) => {
-            capsule_mpc::closed_loop::simulate_cli(&args)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Generate(args) => {
-            capsule_mpc::generate_cmd::run(&args)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Bench(args) => {
-            capsule_mpc::bench::run_cli(&args)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Figures(args) => {
-            for f in capsule_mpc::figures::all_figures(&args.out, args.duration)? {
-                println!("{}", f.describe());
-            }
-            Ok(ExitCode::SUCCESS)
-        }
+        Command::Simulate(args) => cmd::simulate::run(&args)?,
+        Command::Generate(args) => cmd::generate::run(&args)?,
+        Command::Bench(args) => cmd::bench::run(&args)?,
+        Command::Figures(args) => cmd::figures::run(&args)?,
     }
+    Ok(ExitCode::SUCCESS)
 }

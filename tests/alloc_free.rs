@@ -5,12 +5,11 @@
 //! the counter off). `capsule-mpc bench` reports `allocations_per_step` from
 //! this test.
 
-use capsule_mpc::cli::{Sampling, Scenario};
-use capsule_mpc::closed_loop::{run, RunOptions};
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_runtime::controller::Sampling as RtSampling;
 use capsule_mpc_runtime::generated::controller::{solver, spec};
 use capsule_mpc_runtime::DefaultController;
+use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling, Scenario};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 

@@ -1,12 +1,11 @@
 //! Closed-loop acceptance: the generated controller against the plant
 //! simulator, from rest at the origin (issues 3 and 4).
 
-use capsule_mpc::cli::Sampling;
-use capsule_mpc::closed_loop::{run, Preset, RunOptions};
-use capsule_mpc::plant::DisturbanceLevel;
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::SwitchingRule;
+use capsule_mpc_sim::closed_loop::{run, Preset, RunOptions, Sampling};
+use capsule_mpc_sim::plant::DisturbanceLevel;
 
 const A: [f64; 4] = [0.02, 0.0, 0.03, 0.0];
 const C: [f64; 4] = [0.02, 0.0, -0.01, 0.0];
@@ -106,7 +105,7 @@ fn scanner_runs(
     sampling: Sampling,
     switching: SwitchingRule,
     seeds: std::ops::RangeInclusive<u64>,
-) -> Vec<(String, capsule_mpc::metrics::Metrics)> {
+) -> Vec<(String, capsule_mpc_sim::metrics::Metrics)> {
     let mut out = Vec::new();
     for target in [A, C] {
         for seed in seeds.clone() {
@@ -154,7 +153,7 @@ fn variable_sampling_with_the_tight_rule_actuates_longer_and_settles_sooner() {
     assert!(mean >= 0.75, "mean duty until settled {mean}");
     // scanner_runs lists scenario A's seeds, then C's.
     let per_scenario = variable.len() / 2;
-    let mean_settle = |runs: &[(String, capsule_mpc::metrics::Metrics)]| {
+    let mean_settle = |runs: &[(String, capsule_mpc_sim::metrics::Metrics)]| {
         runs.iter()
             .map(|(_, m)| m.settle_time_s.unwrap_or(f64::INFINITY))
             .sum::<f64>()

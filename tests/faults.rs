@@ -5,7 +5,6 @@
 //! with fields modified, never with a struct literal, so that new settings
 //! fields do not break these tests.
 
-use capsule_mpc::plant::{DisturbanceLevel, Phase, Plant};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{
@@ -17,6 +16,7 @@ use capsule_mpc_runtime::generated::controller::solver::{self, Schedule, Solver}
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
 use capsule_mpc_runtime::generated::{PlanSolver, SolveStatus};
 use capsule_mpc_runtime::{CycleOutput, DefaultController, RuntimeError, RuntimeStatus};
+use capsule_mpc_sim::plant::{DisturbanceLevel, Phase, Plant};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

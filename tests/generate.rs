@@ -12,7 +12,7 @@ use std::process::Command;
 fn committed_generated_crate_matches_a_fresh_generation() {
     let mut files = generate(&Config::embedded_default(), &Silent).unwrap();
     // The committed QP iteration map is what the compiled solver measures.
-    let measured = capsule_mpc::qp_map::fill_if_compiled(&mut files).unwrap();
+    let measured = capsule_mpc_sim::qp_map::fill_if_compiled(&mut files).unwrap();
     assert!(
         measured,
         "run `capsule-mpc generate`: src/controller.rs differs"

@@ -1,10 +1,10 @@
 //! The plant against closed forms and its seeding/disturbance contracts.
 
-use capsule_mpc::plant::{DisturbanceLevel, Phase, Plant};
 use capsule_mpc_generator::config::{
     Config, CostUnits, DisturbanceConfig, DisturbanceKind, DragLaw,
 };
 use capsule_mpc_generator::model::{Drag, Model};
+use capsule_mpc_sim::plant::{DisturbanceLevel, Phase, Plant};
 
 fn quadratic_model() -> Model {
     let config = Config::embedded_default();
@@ -64,7 +64,7 @@ fn free_coast_matches_closed_form_backward() {
     check_free_coast(-0.1);
 }
 
-fn run(seed: u64, kind: DisturbanceKind) -> (Vec<capsule_mpc::plant::Record>, Vec<Vec<f64>>) {
+fn run(seed: u64, kind: DisturbanceKind) -> (Vec<capsule_mpc_sim::plant::Record>, Vec<Vec<f64>>) {
     let model = quadratic_model();
     let disturbance = DisturbanceConfig {
         bound: 0.3,

@@ -7,7 +7,6 @@
 //! `cargo test --release` on a 2-core machine; `PROPTEST_CASES=N` raises
 //! every count for a longer local run.
 
-use capsule_mpc::plant::{DisturbanceLevel, Phase, Plant};
 use capsule_mpc_generator::config::{Config, ConfigError, DEFAULT_CONFIG_TOML};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{
@@ -18,6 +17,7 @@ use capsule_mpc_runtime::generated::controller::solver::Solver;
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
 use capsule_mpc_runtime::generated::PlanSolver;
 use capsule_mpc_runtime::{CycleOutput, DefaultController, RuntimeError, RuntimeStatus};
+use capsule_mpc_sim::plant::{DisturbanceLevel, Phase, Plant};
 use proptest::prelude::*;
 use proptest::test_runner::Config as ProptestConfig;
 

@@ -4,9 +4,9 @@
 //! map is a maximum over exactly these solves), and the map's cell layout
 //! is the solver's own index layout.
 
-use capsule_mpc::qp_map::{cell_centre, schedules};
 use capsule_mpc_runtime::generated::controller::{solver, tables};
 use capsule_mpc_runtime::generated::{qp_iteration_map, SolveStatus};
+use capsule_mpc_sim::qp_map::{cell_centre, schedules};
 
 #[test]
 fn cold_solves_at_cell_centres_stay_within_the_map() {

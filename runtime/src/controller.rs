@@ -2,11 +2,11 @@
 //! rule + fault handling, in one fixed-size struct.
 
 use crate::estimator::{CapsuleFilter, REACQUIRE_SPEED_STD_M_PER_S};
-use crate::generated::{Leg, PlanSolver, SolveReport, SolveStatus};
 use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
     PaperConstants, TightInputs,
 };
+use capsule_mpc_generated::{Leg, PlanSolver, SolveReport, SolveStatus};
 
 /// How the scanner interleaves tracking and actuation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

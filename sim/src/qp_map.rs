@@ -19,7 +19,7 @@ use capsule_mpc_runtime::DefaultController;
 use rayon::prelude::*;
 
 /// The controller module this binary was compiled with.
-const COMPILED_CONTROLLER: &str = include_str!("../generated/src/controller.rs");
+const COMPILED_CONTROLLER: &str = include_str!("../../generated/src/controller.rs");
 
 /// Measures the map into `files` when their emitted solver is the one
 /// compiled into this binary (the map describes that solver); returns

@@ -40,7 +40,7 @@ pub enum Phase {
 }
 
 /// Named disturbance levels for the CLI and scripts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum DisturbanceLevel {
     /// No disturbance.

@@ -2,10 +2,10 @@
 //! that the committed crate is what the generator produces.
 
 use crate::cli::{load_config, GenerateArgs};
-use crate::qp_map;
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::generate::{differences, emit_all, generate, write_atomically};
 use capsule_mpc_generator::tables::{Progress, Tables};
+use capsule_mpc_sim::qp_map;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::sync::Mutex;
 use std::time::Instant;

@@ -2,9 +2,8 @@
 //! on the scanner's timeline (tracking phases with u = 0, measurement delay,
 //! actuation phases chosen by the switching rule).
 
-use crate::cli::{Sampling, SimulateArgs};
 use crate::metrics::Metrics;
-use crate::plant::{DisturbanceLevel, Phase, Plant};
+use crate::plant::{Phase, Plant};
 use crate::report::{MeasurementRecord, RunReport};
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig};
@@ -14,8 +13,66 @@ use capsule_mpc_runtime::generated::PlanSolver;
 use capsule_mpc_runtime::{Controller, RuntimeStatus};
 use std::time::Instant;
 
+/// Reference scenarios of the paper (targets in cm, see NOTES.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scenario {
+    /// Both capsules the same way: (2 cm, 0, 3 cm, 0).
+    A,
+    /// Opposite ways: (2 cm, 0, -1 cm, 0).
+    C,
+}
+
+impl Scenario {
+    /// Target state [x1, v1, x2, v2] in m and m/s.
+    pub fn target_state(self) -> Vec<f64> {
+        match self {
+            Scenario::A => vec![0.02, 0.0, 0.03, 0.0],
+            Scenario::C => vec![0.02, 0.0, -0.01, 0.0],
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Scenario::A => "A",
+            Scenario::C => "C",
+        }
+    }
+}
+
+/// When the controller gets measurements and may actuate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Sampling {
+    /// Exact state every sample, no tracking time (an upper bound on quality).
+    Ideal,
+    /// Track, then actuate for a fixed time, every period.
+    Constant,
+    /// Actuate until the switching rule asks for a new measurement.
+    Variable,
+}
+
+impl Sampling {
+    /// The runtime's sampling mode.
+    pub fn runtime(self) -> capsule_mpc_runtime::controller::Sampling {
+        use capsule_mpc_runtime::controller::Sampling as Rt;
+        match self {
+            Sampling::Ideal => Rt::Ideal,
+            Sampling::Constant => Rt::Constant,
+            Sampling::Variable => Rt::Variable,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampling::Ideal => "ideal",
+            Sampling::Constant => "constant",
+            Sampling::Variable => "variable",
+        }
+    }
+}
+
 /// Which generated controller drives the loop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Preset {
     /// Offline plan tables + online refinement (the product).
@@ -208,54 +265,4 @@ impl StatusCounts {
             self.fallback += 1;
         }
     }
-}
-
-/// `capsule-mpc simulate`.
-pub fn simulate_cli(args: &SimulateArgs) -> Result<()> {
-    let config = crate::cli::load_config(args.config.as_deref())?;
-    let model = Model::from_config(&config);
-    let target = args.target_state(model.state_count())?;
-    let mut opts = RunOptions::new(&config, target, args.sampling);
-    opts.duration_s = args.duration;
-    opts.seed = args.seed;
-    opts.disturbance = args.disturbance.config(&model, args.seed);
-    opts.preset = args.preset;
-    opts.switching = args.switching.into();
-    opts.compensate_delay = !args.no_delay_compensation;
-    opts.lose_every = args.lose_every;
-    opts.hold = !args.no_hold;
-    if let Some(d) = args.extra_delay {
-        opts.extra_delay_s = d;
-    }
-    if args.disturbance == DisturbanceLevel::None {
-        opts.disturbance = DisturbanceConfig::default();
-    }
-    let mut report = run(&config, &opts)?;
-    report.scenario = Some(args.scenario_name().to_string());
-    report.disturbance = Some(format!("{:?}", args.disturbance).to_lowercase());
-    let m = &report.metrics;
-    println!(
-        "scenario {} ({} sampling, {:?} preset, disturbance {:?}, seed {}): settle {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
-        args.scenario_name(),
-        args.sampling.name(),
-        args.preset,
-        args.disturbance,
-        args.seed,
-        m.settle_time_s.map_or("never".to_string(), |t| format!("{t:.3} s")),
-        m.final_position_error_m * 1e3,
-        m.max_abs_u * 1e3,
-        m.duty_cycle,
-        m.duty_cycle_until_settled,
-        m.state_bound_violations,
-        m.max_step_compute_ns as f64 / 1e3
-    );
-    if let Some(path) = &args.json {
-        report.write_json(path)?;
-    }
-    if let Some(dir) = &args.plot {
-        for path in crate::figures::plot_run(&report, dir)? {
-            println!("wrote {}", path.display());
-        }
-    }
-    Ok(())
 }

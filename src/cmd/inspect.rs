@@ -2,10 +2,10 @@
 //! user can check a config before spending minutes generating tables.
 
 use crate::cli::{load_config, InspectArgs};
-use crate::report::B_REFERENCE_SPEED_M_PER_S;
 use anyhow::Result;
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::model::Model;
+use capsule_mpc_sim::report::B_REFERENCE_SPEED_M_PER_S;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::io::Write;

@@ -1,0 +1,71 @@
+//! `capsule-mpc bench`: timing of the online step, and peers on the same states.
+//!
+//! # What is timed
+//!
+//! For every benchmark state `e` (relative to the target, SI):
+//!
+//! * **cold** — a fresh controller (resp. solver) with no plan solves from
+//!   `e`: the table lookup picks a stored plan tail, then the SQP iterations
+//!   refine it. This is what the first step after `set_target` costs.
+//! * **warm** — the step that follows, the way the closed loop does it with
+//!   ideal sampling: the plan of the cold solve has its first input applied
+//!   (`shift(1)`), and the solve runs from the *predicted* next state
+//!   `e1 = predict(e, plan, 1)`. Only this second call is timed. It still
+//!   compares the shifted plan with the table's plan from `e1` and runs the
+//!   full `SQP_ITERATIONS` (there is no early exit), so warm and cold differ
+//!   mostly in how good the starting plan is.
+//!
+//! "controller step" is `DefaultController::cycle_full_state(&x)` (estimate
+//! overwrite, relative state, shift, solve, clamp and copy of the plan into
+//! the output; `set_target` is done once on a prototype that is cloned per
+//! state, not timed). "solver only" is `Solver::solve(&e)` of the generated
+//! crate. Each call is timed alone with `std::time::Instant` (its own overhead,
+//! about 20-40 ns, is reported as `timer_overhead_ns` and not subtracted),
+//! inputs and outputs pass through `std::hint::black_box`, on one thread
+//! pinned to one core, after an untimed warm-up pass.
+//!
+//! # States
+//!
+//! The states visited by closed-loop runs of scenarios A and C (ideal
+//! sampling, 3 s, one row per 20 ms sample), plus states drawn uniformly over
+//! the admissible region: each relative position over the warm-start index
+//! range (`tables::INDEX_POSITION_AXIS`), each speed in +-0.3 m/s.
+//!
+//! # Peers
+//!
+//! The generated solver's window QP lives in private fields, so the peers run
+//! inside [`RefSolver`], a plain-Rust re-implementation of the template's
+//! refinement step (same table selection, same model through
+//! `capsule_mpc_generator::model::rk4_capsule` with the config's parameters,
+//! same weights through `OcpWeights::from_config`, same tail cost-to-go,
+//! condensing and line search) whose QP engine is pluggable: the generated
+//! active-set [`solver::BoxQp`] (the reference: it reproduces the generated
+//! solver's plan, which is checked), clarabel, and OSQP (feature
+//! `peers-osqp`). OpEn (PANOC) solves the nonlinear window problem itself:
+//! the N window inputs in the box, the nonlinear cost over the whole plan with
+//! the tail fixed, the exact gradient by the adjoint of the RK4 Jacobians.
+//! All peers start from the same state and plan as the warm step above.
+//!
+//! [`RefSolver`]: reference::RefSolver
+//! [`solver::BoxQp`]: capsule_mpc_runtime::generated::controller::solver::BoxQp
+//!
+//! # Layout
+//!
+//! [`states`] draws the states, [`timing`] holds the timer and percentiles,
+//! [`harness`] times the controller step and the solver and prints the
+//! tables, [`reference`](mod@reference) is the reference refinement loop
+//! with its active-set engine, [`peers`] runs the peers ([`clarabel_peer`],
+//! `osqp_peer` with feature `peers-osqp`, [`open_peer`]) on the warm case.
+
+// Index loops mirror the math (S[k][j], H[a][b]), as in the template.
+#![allow(clippy::needless_range_loop)]
+
+pub mod clarabel_peer;
+pub mod harness;
+pub mod open_peer;
+#[cfg(feature = "peers-osqp")]
+pub mod osqp_peer;
+pub mod peers;
+pub mod reference;
+pub mod states;
+pub mod timing;

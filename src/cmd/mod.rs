@@ -1,0 +1,8 @@
+//! One module per subcommand: each maps its parsed arguments
+//! ([`crate::cli`]) to calls into the libraries and prints the result.
+
+pub mod bench;
+pub mod figures;
+pub mod generate;
+pub mod inspect;
+pub mod simulate;
