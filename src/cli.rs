@@ -31,6 +31,8 @@ pub enum Command {
     Bench(BenchArgs),
     /// Produce the figures of the report.
     Figures(FiguresArgs),
+    /// Run the closed loop to every target of a grid: the reach map.
+    Reach(ReachArgs),
 }
 
 #[derive(Debug, Clone, Args)]
@@ -139,6 +141,15 @@ pub struct SimulateArgs {
         value_name = "X1,V1,X2,V2,..."
     )]
     pub target: Option<Vec<f64>>,
+    /// Start positions x1,x2,... in m, capsules at rest (default: the
+    /// origin); must lie in the config's workspace like a target.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        value_name = "X1,X2,..."
+    )]
+    pub start: Option<Vec<f64>>,
     #[arg(long, value_enum, default_value = "variable")]
     pub sampling: SamplingArg,
     #[arg(long, value_enum, default_value = "paper")]
@@ -199,6 +210,24 @@ impl SimulateArgs {
         Ok(target)
     }
 
+    /// The start positions for `capsules` capsules (empty: the origin).
+    /// Errors on a wrong length or non-finite value.
+    pub fn start_positions(&self, capsules: usize) -> Result<Vec<f64>> {
+        let Some(start) = &self.start else {
+            return Ok(Vec::new());
+        };
+        if start.len() != capsules {
+            bail!(
+                "--start has {} positions; the config has {capsules} capsules",
+                start.len()
+            );
+        }
+        if start.iter().any(|v| !v.is_finite()) {
+            bail!("--start {start:?} is not finite");
+        }
+        Ok(start.clone())
+    }
+
     /// "A", "C" or "custom" (for reports).
     pub fn scenario_name(&self) -> &'static str {
         match (&self.target, self.scenario) {
@@ -206,6 +235,43 @@ impl SimulateArgs {
             (None, s) => s.map_or(Scenario::A, Scenario::from).name(),
         }
     }
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct ReachArgs {
+    /// Config file (TOML); the embedded paper config when absent.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Half-width of the target grid around the start, per capsule, cm.
+    #[arg(long, default_value_t = 4.0, value_name = "R")]
+    pub range_cm: f64,
+    /// Grid spacing, cm.
+    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    pub step_cm: f64,
+    #[arg(long, value_enum, default_value = "ideal")]
+    pub sampling: SamplingArg,
+    #[arg(long, value_enum, default_value = "none")]
+    pub disturbance: DisturbanceArg,
+    /// Seed of the disturbance and the measurement noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Start positions x1,x2,... in m, at rest (default: the origin).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        value_name = "X1,X2,..."
+    )]
+    pub start: Option<Vec<f64>>,
+    /// Simulated time per run, s (default: long enough for the grid).
+    #[arg(long, value_parser = positive_seconds)]
+    pub duration: Option<f64>,
+    /// Write every target's outcome and the summary (JSON) here.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Write heatmaps (settle time, settle / bound) into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Args)]

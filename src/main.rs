@@ -45,6 +45,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Generate(args) => cmd::generate::run(&args)?,
         Command::Bench(args) => cmd::bench::run(&args)?,
         Command::Figures(args) => cmd::figures::run(&args)?,
+        Command::Reach(args) => cmd::reach::run(&args)?,
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -81,10 +81,23 @@ pub enum Preset {
     Paper,
 }
 
+/// A target change during the run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Retarget {
+    /// When the host sets the new target, s.
+    pub at_s: f64,
+    /// The new target state [x1, v1, x2, v2, ...], m and m/s.
+    pub target: Vec<f64>,
+}
+
 /// Everything that defines one closed-loop run.
 #[derive(Debug, Clone)]
 pub struct RunOptions {
     pub target: Vec<f64>,
+    /// Start positions of the capsules (at rest), m; the origin when empty.
+    pub start_m: Vec<f64>,
+    /// A target change during the run (settle metrics then refer to it).
+    pub retarget: Option<Retarget>,
     pub sampling: Sampling,
     pub switching: SwitchingRule,
     pub compensate_delay: bool,
@@ -107,6 +120,8 @@ impl RunOptions {
     pub fn new(config: &Config, target: Vec<f64>, sampling: Sampling) -> RunOptions {
         RunOptions {
             target,
+            start_m: Vec::new(),
+            retarget: None,
             sampling,
             switching: SwitchingRule::Tight,
             compensate_delay: true,
@@ -156,7 +171,20 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         .as_slice()
         .try_into()
         .with_context(|| format!("target needs {NX} entries"))?;
-    let x0 = vec![0.0; NX];
+    let mut x0 = vec![0.0; NX];
+    if !opts.start_m.is_empty() {
+        if opts.start_m.len() != NX / 2 {
+            bail!(
+                "start has {} positions; the solver has {} capsules",
+                opts.start_m.len(),
+                NX / 2
+            );
+        }
+        for (i, &p) in opts.start_m.iter().enumerate() {
+            x0[2 * i] = p;
+        }
+    }
+    check_in_workspace::<S, NX, K>("start", &x0)?;
     let mut plant = Plant::new(
         model.clone(),
         x0.clone(),
@@ -183,13 +211,26 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     let positions: Vec<f64> = x0.iter().step_by(2).copied().collect();
     let mut ctl = Controller::<S, NX, K>::new(settings, &positions)
         .map_err(|e| anyhow::anyhow!("controller settings: {e:?}"))?;
-    ctl.set_target(&target).map_err(|e| match e {
-        capsule_mpc_runtime::RuntimeError::TargetOutOfRange => anyhow::anyhow!(
-            "target {:?} m is outside the range the tables cover from the start state (see README, 'Coverage')",
-            opts.target
-        ),
-        other => anyhow::anyhow!("target: {other:?}"),
-    })?;
+    set_target_or_explain(&mut ctl, &target, "target")?;
+    let retarget: Option<(f64, [f64; NX])> = match &opts.retarget {
+        Some(r) => {
+            let t: [f64; NX] = r
+                .target
+                .as_slice()
+                .try_into()
+                .with_context(|| format!("retarget needs {NX} entries"))?;
+            Some((r.at_s, t))
+        }
+        None => None,
+    };
+    let final_target = retarget.map_or(target, |(_, t)| t);
+    // The minimum rest-to-rest time of the move, from the tables.
+    let mut displacement = [0.0; NX];
+    for i in 0..NX / 2 {
+        displacement[2 * i] = x0[2 * i] - target[2 * i];
+    }
+    let min_time_bound_s = S::chain_time_s(&displacement);
+    let mut retarget_pending = retarget;
 
     let mut measurements = Vec::new();
     let mut max_ns: u64 = 0;
@@ -198,6 +239,12 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     let tracking_s = settings.tracking_time_s;
     while plant.time_s() < opts.duration_s - 1e-9 {
         cycle += 1;
+        if let Some((at_s, t)) = retarget_pending {
+            if plant.time_s() >= at_s - 1e-9 {
+                set_target_or_explain(&mut ctl, &t, "retarget")?;
+                retarget_pending = None;
+            }
+        }
         let out = if opts.sampling == Sampling::Ideal {
             let x: [f64; NX] = plant.state().try_into().expect("state length");
             measurements.push(MeasurementRecord {
@@ -245,13 +292,84 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     }
     let (pos_bound, speed_bound) = (S::POSITION_BOUND_M, S::SPEED_BOUND_M_PER_S);
     let records = plant.into_records();
-    let metrics = Metrics::compute(&records, &opts.target, pos_bound, speed_bound, max_ns)?;
-    let mut report =
-        RunReport::from_records(&records, measurements, &model, opts.target.clone(), metrics);
+    let mut metrics = Metrics::compute(&records, &final_target, pos_bound, speed_bound, max_ns)?;
+    if retarget.is_none() && min_time_bound_s.is_finite() && min_time_bound_s > 0.0 {
+        metrics.min_time_bound_s = Some(min_time_bound_s);
+        metrics.settle_over_bound = metrics.settle_time_s.map(|t| t / min_time_bound_s);
+    }
+    metrics.workspace_excursion_m = records
+        .iter()
+        .flat_map(|r| r.x.iter().step_by(2))
+        .map(|&p| {
+            (S::WORKSPACE_MIN_M - p)
+                .max(p - S::WORKSPACE_MAX_M)
+                .max(0.0)
+        })
+        .fold(0.0, f64::max);
+    let mut report = RunReport::from_records(
+        &records,
+        measurements,
+        &model,
+        final_target.to_vec(),
+        metrics,
+    );
     report.sampling = Some(opts.sampling.name().to_string());
     report.seed = Some(opts.seed);
     report.fallback_cycles = Some(statuses.fallback);
     Ok(report)
+}
+
+/// Positions of the full state `x` must lie in the workspace; the error
+/// names the argument, the capsule and by how much.
+fn check_in_workspace<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    argument: &'static str,
+    x: &[f64],
+) -> Result<()> {
+    capsule_mpc_runtime::controller::check_workspace::<S, NX, K>(argument, x, 2)
+        .map_err(|e| explain::<S, NX, K>(e, x))
+}
+
+fn set_target_or_explain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    ctl: &mut Controller<S, NX, K>,
+    target: &[f64; NX],
+    argument: &'static str,
+) -> Result<()> {
+    ctl.set_target(target)
+        .map_err(|e| explain::<S, NX, K>(e, target))
+        .with_context(|| format!("{argument} {target:?} m"))
+}
+
+/// A runtime error as a sentence for the command line.
+fn explain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    e: capsule_mpc_runtime::RuntimeError,
+    x: &[f64],
+) -> anyhow::Error {
+    use capsule_mpc_runtime::RuntimeError as E;
+    match e {
+        E::OutsideWorkspace {
+            argument: _,
+            capsule,
+            excess_m,
+        } => anyhow::anyhow!(
+            "capsule {} at {} m is outside the workspace [{}, {}] m by {:.4} m ({} the {} bound; config section [workspace])",
+            capsule + 1,
+            x.get(2 * capsule).copied().unwrap_or(f64::NAN),
+            S::WORKSPACE_MIN_M,
+            S::WORKSPACE_MAX_M,
+            excess_m.abs(),
+            if excess_m < 0.0 { "below" } else { "above" },
+            if excess_m < 0.0 { "lower" } else { "upper" },
+        ),
+        E::TargetSpeedNotZero { capsule } => anyhow::anyhow!(
+            "target speed of capsule {} is {} m/s; targets are rest states (speed 0)",
+            capsule + 1,
+            x.get(2 * capsule + 1).copied().unwrap_or(f64::NAN)
+        ),
+        E::TargetOutOfRange => anyhow::anyhow!(
+            "no chain of stored plans reaches it from the current state (the state lies outside the workspace the tables were made for)"
+        ),
+        other => anyhow::anyhow!("{other:?}"),
+    }
 }
 
 #[derive(Debug, Default)]

@@ -11,6 +11,8 @@
 //!   sampling mode, scenario, preset) and the driver that runs it;
 //! * [`metrics`] and [`report`]: settling time, duty cycle and errors of a
 //!   run, and the JSON run report;
+//! * [`reach`]: the reach map, the closed loop run to every target of a
+//!   grid (settle time against the minimum-time bound);
 //! * [`qp_map`]: the per-cell QP iteration map, measured with the compiled
 //!   solver for `capsule-mpc generate`.
 //!
@@ -21,4 +23,5 @@ pub mod closed_loop;
 pub mod metrics;
 pub mod plant;
 pub mod qp_map;
+pub mod reach;
 pub mod report;

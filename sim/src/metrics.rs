@@ -31,6 +31,17 @@ pub struct Metrics {
     pub state_bound_violations: usize,
     /// Longest controller computation for one step, ns (measured by the caller).
     pub max_step_compute_ns: u64,
+    /// Minimum rest-to-rest time of the move into the settle band, from the
+    /// generator's tables (summed over legs for a chained move), s; `null`
+    /// when unknown (paper preset, a retarget, no move).
+    #[serde(default)]
+    pub min_time_bound_s: Option<f64>,
+    /// settle_time_s / min_time_bound_s; `null` when either is.
+    #[serde(default)]
+    pub settle_over_bound: Option<f64>,
+    /// Farthest any capsule went beyond the workspace box, m (0: inside).
+    #[serde(default)]
+    pub workspace_excursion_m: f64,
 }
 
 /// True when every capsule of `x` is inside the settling band around `target`.
@@ -128,6 +139,9 @@ impl Metrics {
             duty_cycle_until_settled,
             state_bound_violations,
             max_step_compute_ns,
+            min_time_bound_s: None,
+            settle_over_bound: None,
+            workspace_excursion_m: 0.0,
         })
     }
 }

@@ -5,4 +5,5 @@ pub mod bench;
 pub mod figures;
 pub mod generate;
 pub mod inspect;
+pub mod reach;
 pub mod simulate;

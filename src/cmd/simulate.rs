@@ -20,6 +20,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let model = Model::from_config(&config);
     let target = args.target_state(model.state_count())?;
     let mut opts = RunOptions::new(&config, target, sampling);
+    opts.start_m = args.start_positions(model.capsule_count())?;
     opts.duration_s = args.duration;
     opts.seed = args.seed;
     opts.disturbance = disturbance.config(&model, args.seed);
@@ -39,13 +40,17 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     report.disturbance = Some(format!("{disturbance:?}").to_lowercase());
     let m = &report.metrics;
     println!(
-        "scenario {} ({} sampling, {:?} preset, disturbance {:?}, seed {}): settle {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
+        "scenario {} ({} sampling, {:?} preset, disturbance {:?}, seed {}): settle {}{} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
         args.scenario_name(),
         sampling.name(),
         preset,
         disturbance,
         args.seed,
         m.settle_time_s.map_or("never".to_string(), |t| format!("{t:.3} s")),
+        m.min_time_bound_s.map_or(String::new(), |b| format!(
+            " (min-time bound {b:.3} s{})",
+            m.settle_over_bound.map_or(String::new(), |r| format!(", ratio {r:.2}"))
+        )),
         m.final_position_error_m * 1e3,
         m.max_abs_u * 1e3,
         m.duty_cycle,

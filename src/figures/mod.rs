@@ -13,6 +13,7 @@
 //! the numbers written beside them.
 
 mod figure;
+pub mod heatmap;
 pub mod paper;
 mod render;
 pub mod run;

@@ -12,12 +12,12 @@ use std::sync::OnceLock;
 
 /// The embedded font (see `assets/DejaVu-LICENSE`).
 const FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
-const FONT: &str = "sans-serif";
+pub(super) const FONT: &str = "sans-serif";
 
 /// Pixel size of every figure (SVG user units and PNG pixels).
 const FIGURE_SIZE: (u32, u32) = (1280, 960);
 
-fn register_font() -> Result<()> {
+pub(super) fn register_font() -> Result<()> {
     static REGISTERED: OnceLock<std::result::Result<(), String>> = OnceLock::new();
     REGISTERED
         .get_or_init(|| {
@@ -28,7 +28,7 @@ fn register_font() -> Result<()> {
         .map_err(|e| anyhow!(e))
 }
 
-fn plot_err<E: std::fmt::Display>(e: E) -> anyhow::Error {
+pub(super) fn plot_err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow!("plotting: {e}")
 }
 

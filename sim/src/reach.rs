@@ -1,0 +1,259 @@
+//! The reach map: the closed loop run to every target of a grid, the map a
+//! user needs before planning an experiment ("can it take them there, and
+//! how fast?").
+//!
+//! Targets are every combination of capsule positions `start + k step`
+//! with |k step| <= range (the start itself excluded), at rest. Each run
+//! reports whether the target was refused (and why), its settle time, the
+//! generator's minimum rest-to-rest time for that move and their ratio.
+//! Runs are independent, so they go across cores (rayon).
+
+use crate::closed_loop::{run, RunOptions, Sampling};
+use crate::plant::DisturbanceLevel;
+use anyhow::{bail, Result};
+use capsule_mpc_generator::config::{Config, DisturbanceConfig};
+use capsule_mpc_generator::model::Model;
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// Most targets one reach map runs (keeps a typo in the step from asking
+/// for millions of runs).
+pub const MAX_REACH_TARGETS: usize = 20_000;
+
+/// What a reach map runs.
+#[derive(Debug, Clone)]
+pub struct ReachOptions {
+    /// Half-width of the target grid around the start, per capsule, m.
+    pub range_m: f64,
+    /// Grid spacing, m.
+    pub step_m: f64,
+    pub sampling: Sampling,
+    pub disturbance: DisturbanceLevel,
+    pub seed: u64,
+    /// Start positions (at rest), m; the origin when empty.
+    pub start_m: Vec<f64>,
+    /// Simulated time per run, s; None: long enough for the grid's moves
+    /// (see [`default_duration_s`]).
+    pub duration_s: Option<f64>,
+}
+
+/// Simulated time per run when none is given: 2 s plus 1 s per cm of the
+/// grid's half-width (ideal sampling), 1.5 times that on the scanner cycle,
+/// at most 30 s: the slowest moves of the default grid settle well inside.
+pub fn default_duration_s(range_m: f64, sampling: Sampling) -> f64 {
+    let ideal = 2.0 + 100.0 * range_m;
+    let s = match sampling {
+        Sampling::Ideal => ideal,
+        Sampling::Constant | Sampling::Variable => 1.5 * ideal,
+    };
+    s.min(30.0)
+}
+
+/// The outcome of one target.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReachPoint {
+    /// Target positions, m (speeds 0).
+    pub target_m: Vec<f64>,
+    /// Why the target was refused (None: it was run).
+    pub refused: Option<String>,
+    pub settle_time_s: Option<f64>,
+    pub min_time_bound_s: Option<f64>,
+    pub settle_over_bound: Option<f64>,
+    pub final_position_error_m: Option<f64>,
+}
+
+/// Figures over a reach map (worst cases, not means of the easy ones).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReachSummary {
+    pub targets: usize,
+    pub refused: usize,
+    pub never_settled: usize,
+    pub median_settle_over_bound: Option<f64>,
+    pub worst_settle_over_bound: Option<f64>,
+    /// The target of the worst ratio, m.
+    pub worst_ratio_target_m: Option<Vec<f64>>,
+    pub median_settle_time_s: Option<f64>,
+    pub worst_settle_time_s: Option<f64>,
+}
+
+/// The grid's targets (positions only), row-major with the first capsule
+/// slowest; the start itself is left out.
+pub fn grid_targets(start_m: &[f64], range_m: f64, step_m: f64) -> Result<Vec<Vec<f64>>> {
+    if !(step_m.is_finite() && step_m > 0.0 && range_m.is_finite() && range_m >= 0.0) {
+        bail!("reach grid: range {range_m} m and step {step_m} m must be finite, step > 0");
+    }
+    let half = (range_m / step_m + 1e-9).floor() as i64;
+    let per_axis = (2 * half + 1) as usize;
+    let count = per_axis
+        .checked_pow(start_m.len() as u32)
+        .unwrap_or(usize::MAX);
+    if count > MAX_REACH_TARGETS {
+        bail!(
+            "reach grid: {count} targets (range {range_m} m, step {step_m} m, {} capsules) exceed {MAX_REACH_TARGETS}; use a larger step",
+            start_m.len()
+        );
+    }
+    let mut targets = Vec::with_capacity(count);
+    for flat in 0..count {
+        let mut rest = flat;
+        let mut t = vec![0.0; start_m.len()];
+        let mut offsets_zero = true;
+        for i in (0..start_m.len()).rev() {
+            let k = (rest % per_axis) as i64 - half;
+            rest /= per_axis;
+            offsets_zero &= k == 0;
+            // Rounded to the nanometre so that printed targets read cleanly.
+            t[i] = ((start_m[i] + k as f64 * step_m) * 1e9).round() / 1e9;
+        }
+        if !offsets_zero {
+            targets.push(t);
+        }
+    }
+    Ok(targets)
+}
+
+/// Runs the closed loop to every grid target; `tick` is called after each
+/// run (from any thread).
+pub fn reach_map(
+    config: &Config,
+    opts: &ReachOptions,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Vec<ReachPoint>> {
+    let model = Model::from_config(config);
+    let m = model.capsule_count();
+    let start = if opts.start_m.is_empty() {
+        vec![0.0; m]
+    } else {
+        opts.start_m.clone()
+    };
+    if start.len() != m {
+        bail!(
+            "start has {} positions; the config has {m} capsules",
+            start.len()
+        );
+    }
+    let targets = grid_targets(&start, opts.range_m, opts.step_m)?;
+    let duration_s = opts
+        .duration_s
+        .unwrap_or_else(|| default_duration_s(opts.range_m, opts.sampling));
+    let points = targets
+        .par_iter()
+        .map(|t| {
+            let state: Vec<f64> = t.iter().flat_map(|&p| [p, 0.0]).collect();
+            let mut run_opts = RunOptions::new(config, state, opts.sampling);
+            run_opts.start_m = start.clone();
+            run_opts.seed = opts.seed;
+            run_opts.duration_s = duration_s;
+            run_opts.disturbance = match opts.disturbance {
+                DisturbanceLevel::None => DisturbanceConfig::default(),
+                level => level.config(&model, opts.seed),
+            };
+            let point = match run(config, &run_opts) {
+                Ok(report) => {
+                    let m = report.metrics;
+                    ReachPoint {
+                        target_m: t.clone(),
+                        refused: None,
+                        settle_time_s: m.settle_time_s,
+                        min_time_bound_s: m.min_time_bound_s,
+                        settle_over_bound: m.settle_over_bound,
+                        final_position_error_m: Some(m.final_position_error_m),
+                    }
+                }
+                Err(e) => ReachPoint {
+                    target_m: t.clone(),
+                    refused: Some(format!("{e:#}")),
+                    settle_time_s: None,
+                    min_time_bound_s: None,
+                    settle_over_bound: None,
+                    final_position_error_m: None,
+                },
+            };
+            tick();
+            point
+        })
+        .collect();
+    Ok(points)
+}
+
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    Some(if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    })
+}
+
+impl ReachSummary {
+    pub fn of(points: &[ReachPoint]) -> ReachSummary {
+        let ratios: Vec<(f64, &ReachPoint)> = points
+            .iter()
+            .filter_map(|p| p.settle_over_bound.map(|r| (r, p)))
+            .collect();
+        let worst = ratios.iter().max_by(|a, b| a.0.total_cmp(&b.0));
+        let settles: Vec<f64> = points.iter().filter_map(|p| p.settle_time_s).collect();
+        ReachSummary {
+            targets: points.len(),
+            refused: points.iter().filter(|p| p.refused.is_some()).count(),
+            never_settled: points
+                .iter()
+                .filter(|p| p.refused.is_none() && p.settle_time_s.is_none())
+                .count(),
+            median_settle_over_bound: median(ratios.iter().map(|r| r.0).collect()),
+            worst_settle_over_bound: worst.map(|w| w.0),
+            worst_ratio_target_m: worst.map(|w| w.1.target_m.clone()),
+            median_settle_time_s: median(settles.clone()),
+            worst_settle_time_s: settles.into_iter().reduce(f64::max),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_grid_leaves_out_the_start_and_orders_rows_by_the_first_capsule() {
+        let t = grid_targets(&[0.0, 0.01], 0.01, 0.01).unwrap();
+        assert_eq!(t.len(), 8);
+        assert_eq!(t[0], vec![-0.01, 0.0]);
+        assert_eq!(t[1], vec![-0.01, 0.01]);
+        assert!(!t.contains(&vec![0.0, 0.01]));
+    }
+
+    #[test]
+    fn a_huge_grid_is_refused_with_its_size() {
+        let err = grid_targets(&[0.0, 0.0], 0.06, 1e-5)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("exceed"), "{err}");
+        assert!(grid_targets(&[0.0], 0.01, 0.0).is_err());
+    }
+
+    #[test]
+    fn medians_and_worst_cases() {
+        let p = |r: Option<f64>, s: Option<f64>, refused: bool| ReachPoint {
+            target_m: vec![0.01],
+            refused: refused.then(|| "x".to_string()),
+            settle_time_s: s,
+            min_time_bound_s: None,
+            settle_over_bound: r,
+            final_position_error_m: None,
+        };
+        let s = ReachSummary::of(&[
+            p(Some(1.0), Some(0.5), false),
+            p(Some(1.5), Some(0.9), false),
+            p(None, None, false),
+            p(None, None, true),
+        ]);
+        assert_eq!((s.targets, s.refused, s.never_settled), (4, 1, 1));
+        assert_eq!(s.median_settle_over_bound, Some(1.25));
+        assert_eq!(s.worst_settle_over_bound, Some(1.5));
+        assert_eq!(s.worst_settle_time_s, Some(0.9));
+    }
+}
