@@ -76,7 +76,7 @@ fn other_covered_targets_settle() {
 }
 
 #[test]
-fn target_outside_the_tables_is_a_clear_error() {
+fn target_outside_the_workspace_is_a_clear_error() {
     let (config, opts) = options(
         &[0.2, 0.0, -0.2, 0.0],
         Sampling::Ideal,
@@ -84,7 +84,12 @@ fn target_outside_the_tables_is_a_clear_error() {
         1,
     );
     let err = run(&config, &opts).unwrap_err().to_string();
-    assert!(err.contains("outside the range the tables cover"), "{err}");
+    // Names the capsule, the bound and by how much.
+    assert!(
+        err.contains("capsule 1 at 0.2 m is outside the workspace"),
+        "{err}"
+    );
+    assert!(err.contains("by 0.1400 m (above the upper bound"), "{err}");
 }
 
 /// The paper's NMPC taken literally stalls on scenario C (NOTES.md): it is

@@ -916,9 +916,20 @@ fn bad_arguments_are_errors_naming_the_argument_and_change_nothing() {
             RuntimeError::NonFinite("target")
         );
     }
+    match c.set_target(&[0.2, 0.0, -0.2, 0.0]).unwrap_err() {
+        RuntimeError::OutsideWorkspace {
+            argument,
+            capsule,
+            excess_m,
+        } => {
+            assert_eq!((argument, capsule), ("target", 0));
+            assert!((excess_m - 0.14).abs() < 1e-12, "{excess_m}");
+        }
+        e => panic!("{e:?}"),
+    }
     assert_eq!(
-        c.set_target(&[0.2, 0.0, -0.2, 0.0]).unwrap_err(),
-        RuntimeError::TargetOutOfRange
+        c.set_target(&[0.02, 0.0, 0.03, 0.001]).unwrap_err(),
+        RuntimeError::TargetSpeedNotZero { capsule: 1 }
     );
     unchanged(&c);
 

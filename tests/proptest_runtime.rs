@@ -144,7 +144,9 @@ fn run_loop(case: &LoopCase) -> Result<Option<()>, TestCaseError> {
         core::array::from_fn(|j| if j % 2 == 0 { case.target[j / 2] } else { 0.0 });
     match ctl.set_target(&target) {
         Ok(()) => {}
-        Err(RuntimeError::TargetOutOfRange) => return Ok(None),
+        Err(RuntimeError::TargetOutOfRange)
+        | Err(RuntimeError::OutsideWorkspace { .. })
+        | Err(RuntimeError::TargetSpeedNotZero { .. }) => return Ok(None),
         Err(e) => return Err(TestCaseError::fail(format!("set_target: {e:?}"))),
     }
     for cycle in 1..=case.cycles {
@@ -390,7 +392,9 @@ proptest! {
                 Op::SetTarget(t) => match ctl.set_target(t) {
                     Ok(()) => prop_assert_eq!(ctl.target(), Some(t)),
                     Err(RuntimeError::NonFinite(name)) => prop_assert_eq!(name, "target"),
-                    Err(RuntimeError::TargetOutOfRange) => {}
+                    Err(RuntimeError::TargetOutOfRange)
+                    | Err(RuntimeError::OutsideWorkspace { .. })
+                    | Err(RuntimeError::TargetSpeedNotZero { .. }) => {}
                     Err(e) => return Err(TestCaseError::fail(format!("set_target: {e:?}"))),
                 },
                 Op::Reset(p) => match ctl.reset(p) {

@@ -2,14 +2,16 @@
 //! template's interface changed and the `capsule-mpc` binary (which links
 //! the old generated crate) cannot be built:
 //!
-//!     cargo run --release -p capsule-mpc-generator --example bootstrap [CONFIG] [OUT]
+//!     cargo run --release -p capsule-mpc-generator --example bootstrap [CONFIG] [OUT] [--reuse-tables]
 //!
+//! (`--reuse-tables`: re-emit from OUT/tables.bin when only the templates
+//! changed)
 //! then `cargo build --release` and `capsule-mpc generate --reuse-tables`
 //! to measure the QP iteration map.
 
 use capsule_mpc_generator::config::Config;
-use capsule_mpc_generator::generate::{generate, write_atomically};
-use capsule_mpc_generator::tables::Progress;
+use capsule_mpc_generator::generate::{emit_all, generate, write_atomically};
+use capsule_mpc_generator::tables::{Progress, Tables};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -43,7 +45,9 @@ impl Progress for Log {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
+    let all: Vec<String> = std::env::args().skip(1).collect();
+    let reuse = all.iter().any(|a| a == "--reuse-tables");
+    let mut args = all.into_iter().filter(|a| a != "--reuse-tables");
     let config = match args.next() {
         Some(path) => Config::from_file(std::path::Path::new(&path))?,
         None => Config::embedded_default(),
@@ -54,7 +58,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         total: AtomicUsize::new(0),
         started: Instant::now(),
     };
-    let files = generate(&config, &log)?;
+    let files = if reuse {
+        let tables = Tables::read(&out.join("tables.bin"), &config)?;
+        emit_all(&config, tables)?
+    } else {
+        generate(&config, &log)?
+    };
     write_atomically(&out, &files)?;
     let t = &files.tables;
     println!(

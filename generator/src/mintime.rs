@@ -348,3 +348,43 @@ const FIRST_RING_SAMPLES: usize = 30;
 /// An inner neighbour's plan, stretched by these many samples, is a
 /// starting guess too.
 const STRETCH_SAMPLES: [usize; 2] = [2, 6];
+
+/// The band stored plans are finished into, a few samples after their
+/// minimum-time arrival: near rest, so that the residual relative speed of
+/// the capsules (which the single gradient cannot damp near rest) drifts
+/// them apart slowly, and the closed loop's refinement starts from a plan
+/// that already stops.
+pub const FINISH_BAND: Band = Band {
+    position_m: 0.05e-3,
+    speed_m_per_s: 0.05e-3,
+};
+
+/// Samples added after the minimum-time arrival to finish at rest.
+pub const FINISH_SAMPLES: usize = 2;
+
+/// The minimum-time inputs `arrived` (length T), padded with
+/// [`FINISH_SAMPLES`] zero samples and re-solved over T + FINISH_SAMPLES
+/// toward [`FINISH_BAND`]; the padded inputs when that does not end nearer
+/// rest, `arrived` itself when it does not fit in `max_samples`.
+pub fn finish_at_rest(
+    base: &Ocp,
+    e0: &[f64],
+    arrived: &MinTimePlan,
+    max_samples: usize,
+    sqp_iterations: usize,
+) -> Vec<f64> {
+    let t = arrived.samples + FINISH_SAMPLES;
+    if arrived.samples == 0 || t > max_samples {
+        return arrived.u.clone();
+    }
+    let ocp = reach_ocp(base, t, &FINISH_BAND);
+    let mut guess = arrived.u.clone();
+    guess.resize(t, 0.0);
+    let (_, before) = ocp.rollout(e0, &guess);
+    let plan = ocp.solve(e0, &guess, sqp_iterations);
+    if plan.cost < before {
+        plan.u
+    } else {
+        guess
+    }
+}

@@ -10,7 +10,7 @@
 
 use crate::config::Config;
 use crate::legs::{build_leg_table, LegTable};
-use crate::mintime::{arrival_sample, grid_min_time_plans, SETTLE_BAND};
+use crate::mintime::{arrival_sample, finish_at_rest, grid_min_time_plans, SETTLE_BAND};
 use crate::model::Model;
 use crate::ocp::{Ocp, Plan};
 use rand::{Rng, SeedableRng};
@@ -373,7 +373,7 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
 fn schedule_plans(
     ocp: &Ocp,
     axis: &Axis,
-    e0_of: &dyn Fn(usize) -> Vec<f64>,
+    e0_of: &(dyn Fn(usize) -> Vec<f64> + Sync),
     grid: &crate::config::GridConfig,
     progress: &dyn Progress,
 ) -> Vec<PlanEntry> {
@@ -383,18 +383,24 @@ fn schedule_plans(
     // Wall time per plan sample: the sample and the coast after it.
     let sample_period_s = ocp.dt_s + ocp.coast_s;
     min_time
-        .into_iter()
+        .into_par_iter()
         .enumerate()
         .map(|(flat, found)| {
             let e0 = e0_of(flat);
-            let (reached, samples, mut u) = match found {
-                Some(p) => (true, p.samples, p.u),
-                None => (false, 0, Vec::new()),
+            let (reached, samples, arrival_states, mut u) = match found {
+                Some(p) => {
+                    let (states, _) = ocp.rollout(&e0, &p.u);
+                    let u = finish_at_rest(ocp, &e0, &p, steps, grid.sqp_iterations);
+                    (true, p.samples, states, u)
+                }
+                None => (false, 0, Vec::new(), Vec::new()),
             };
             u.resize(steps, 0.0);
             let (states, cost) = ocp.rollout(&e0, &u);
+            // The bound is the minimum-time plan's own arrival, before the
+            // finishing samples.
             let min_time_s = match reached {
-                true => settle_time_s(&states[..=samples], sample_period_s),
+                true => settle_time_s(&arrival_states, sample_period_s),
                 false => f64::INFINITY,
             };
             PlanEntry {

@@ -1,0 +1,227 @@
+//! Issue 13: every target in the workspace is accepted and reached, close to
+//! the minimum rest-to-rest time the generator computed, from rest anywhere
+//! and from a moving state when the target changes mid-run.
+
+use capsule_mpc_generator::config::{Config, DisturbanceConfig};
+use capsule_mpc_generator::model::Model;
+use capsule_mpc_sim::closed_loop::{run, Retarget, RunOptions, Sampling};
+use capsule_mpc_sim::metrics::Metrics;
+use capsule_mpc_sim::plant::DisturbanceLevel;
+use capsule_mpc_sim::reach::{reach_map, ReachOptions, ReachPoint, ReachSummary};
+
+fn cm(v: &[f64]) -> Vec<f64> {
+    v.iter().map(|x| x * 100.0).collect()
+}
+
+fn reach(range_m: f64, step_m: f64, start_m: Vec<f64>) -> (Vec<ReachPoint>, ReachSummary) {
+    let config = Config::embedded_default();
+    let opts = ReachOptions {
+        range_m,
+        step_m,
+        sampling: Sampling::Ideal,
+        disturbance: DisturbanceLevel::None,
+        seed: 1,
+        start_m,
+        duration_s: None,
+    };
+    let points = reach_map(&config, &opts, &|| {}).unwrap();
+    let summary = ReachSummary::of(&points);
+    (points, summary)
+}
+
+fn failures(points: &[ReachPoint]) -> Vec<String> {
+    points
+        .iter()
+        .filter(|p| p.refused.is_some() || p.settle_time_s.is_none())
+        .map(|p| format!("{:?} cm: {:?}", cm(&p.target_m), p.refused))
+        .collect()
+}
+
+/// The issue's grid: 80 targets of a 1 cm grid over +-4 cm from rest at the
+/// origin, ideal sampling, no disturbance. Every target is accepted and
+/// settles; settle / bound <= 1.25 at the median and <= 1.6 at worst.
+#[test]
+fn every_target_of_the_4_cm_grid_settles_near_its_minimum_time() {
+    let (points, s) = reach(0.04, 0.01, Vec::new());
+    assert_eq!(s.targets, 80);
+    assert!(failures(&points).is_empty(), "{:?}", failures(&points));
+    let (median, worst) = (
+        s.median_settle_over_bound.unwrap(),
+        s.worst_settle_over_bound.unwrap(),
+    );
+    println!(
+        "settle / bound: median {median:.3}, worst {worst:.3} at {:?} cm; settle median {:.3} s, worst {:.3} s",
+        cm(s.worst_ratio_target_m.as_ref().unwrap()),
+        s.median_settle_time_s.unwrap(),
+        s.worst_settle_time_s.unwrap()
+    );
+    assert!(median <= 1.25, "median ratio {median}");
+    assert!(worst <= 1.6, "worst ratio {worst}: {s:?}");
+    // Every bound is a real time: positive and finite.
+    for p in &points {
+        let b = p.min_time_bound_s.unwrap();
+        assert!(b.is_finite() && b > 0.0, "{:?}: bound {b}", cm(&p.target_m));
+    }
+}
+
+/// Off the table lattice, from a start that is not the origin, over the
+/// whole workspace: nothing is refused and everything settles.
+#[test]
+fn an_off_lattice_grid_from_an_off_centre_start_is_covered() {
+    let (points, s) = reach(0.052, 0.013, vec![0.007, -0.011]);
+    let inside: Vec<&ReachPoint> = points
+        .iter()
+        .filter(|p| p.target_m.iter().all(|x| x.abs() <= 0.06))
+        .collect();
+    assert!(inside.len() >= 60, "{}", inside.len());
+    for p in &points {
+        let outside = p.target_m.iter().any(|x| x.abs() > 0.06);
+        match (&p.refused, outside) {
+            (Some(reason), true) => assert!(reason.contains("outside the workspace"), "{reason}"),
+            (Some(reason), false) => panic!("{:?} cm refused: {reason}", cm(&p.target_m)),
+            (None, true) => panic!("{:?} cm is outside but accepted", cm(&p.target_m)),
+            (None, false) => assert!(
+                p.settle_time_s.is_some(),
+                "{:?} cm never settled",
+                cm(&p.target_m)
+            ),
+        }
+    }
+    println!("{s:?}");
+}
+
+#[test]
+fn scenarios_a_and_c_settle_within_0_8_s() {
+    let config = Config::embedded_default();
+    for target in [[0.02, 0.0, 0.03, 0.0], [0.02, 0.0, -0.01, 0.0]] {
+        let mut opts = RunOptions::new(&config, target.to_vec(), Sampling::Ideal);
+        opts.duration_s = 3.0;
+        let m = run(&config, &opts).unwrap().metrics;
+        let settle = m.settle_time_s.expect("settles");
+        println!(
+            "{:?} cm: settle {settle:.3} s, bound {:?} s",
+            cm(&target),
+            m.min_time_bound_s
+        );
+        assert!(settle <= 0.8, "{target:?}: {m:?}");
+    }
+}
+
+fn far_run(start: [f64; 2], target: [f64; 2], sampling: Sampling, seed: u64) -> Metrics {
+    let config = Config::embedded_default();
+    let model = Model::from_config(&config);
+    let state = vec![target[0], 0.0, target[1], 0.0];
+    let mut opts = RunOptions::new(&config, state, sampling);
+    opts.start_m = start.to_vec();
+    opts.seed = seed;
+    opts.duration_s = 14.0;
+    opts.disturbance = match sampling {
+        Sampling::Ideal => DisturbanceConfig::default(),
+        _ => DisturbanceLevel::Paper.config(&model, seed),
+    };
+    run(&config, &opts).unwrap().metrics
+}
+
+/// 12 cm moves across the workspace (chained legs), under every sampling
+/// mode; the scanner cycles with noise and the paper's disturbance.
+#[test]
+fn far_moves_across_the_workspace_settle_under_every_sampling() {
+    let moves = [
+        ([-0.06, -0.06], [0.06, 0.06]),
+        ([-0.06, 0.06], [0.06, -0.06]),
+        ([0.06, -0.02], [-0.05, 0.045]),
+    ];
+    for (start, target) in moves {
+        for sampling in [Sampling::Ideal, Sampling::Constant, Sampling::Variable] {
+            let m = far_run(start, target, sampling, 1);
+            println!(
+                "{:?} -> {:?} cm, {}: settle {:?} s, bound {:?} s",
+                cm(&start),
+                cm(&target),
+                sampling.name(),
+                m.settle_time_s,
+                m.min_time_bound_s
+            );
+            let settle = m
+                .settle_time_s
+                .unwrap_or_else(|| panic!("{start:?} -> {target:?} {sampling:?}: {m:?}"));
+            assert!(m.final_position_error_m <= 1e-3, "{m:?}");
+            if sampling == Sampling::Ideal {
+                // A chained move keeps close to its chained bound.
+                let ratio = m.settle_over_bound.unwrap();
+                assert!(
+                    ratio <= 1.6,
+                    "{start:?} -> {target:?}: ratio {ratio} ({settle} s)"
+                );
+            }
+        }
+    }
+}
+
+/// The target changes while the capsules move fast toward another one.
+#[test]
+fn a_target_changed_mid_run_is_reached_from_the_moving_state() {
+    let config = Config::embedded_default();
+    let model = Model::from_config(&config);
+    let cases = [
+        ([0.02, 0.0, 0.03, 0.0], [0.02, 0.0, -0.01, 0.0], 0.2),
+        ([0.02, 0.0, -0.01, 0.0], [-0.05, 0.0, 0.05, 0.0], 0.3),
+        ([0.04, 0.0, -0.04, 0.0], [0.06, 0.0, 0.06, 0.0], 0.5),
+        ([-0.03, 0.0, 0.01, 0.0], [0.0, 0.0, 0.0, 0.0], 0.15),
+    ];
+    for (first, second, at_s) in cases {
+        for sampling in [Sampling::Ideal, Sampling::Variable] {
+            let mut opts = RunOptions::new(&config, first.to_vec(), sampling);
+            opts.retarget = Some(Retarget {
+                at_s,
+                target: second.to_vec(),
+            });
+            opts.duration_s = 10.0;
+            if sampling != Sampling::Ideal {
+                opts.disturbance = DisturbanceLevel::Paper.config(&model, 2);
+                opts.seed = 2;
+            }
+            let report = run(&config, &opts).unwrap();
+            let m = &report.metrics;
+            println!(
+                "{:?} then {:?} cm at {at_s} s, {}: settle {:?} s",
+                cm(&first),
+                cm(&second),
+                sampling.name(),
+                m.settle_time_s
+            );
+            // The capsules were moving when the target changed.
+            let k = report.t.iter().position(|&t| t >= at_s).unwrap();
+            let speed = report.x[k]
+                .iter()
+                .skip(1)
+                .step_by(2)
+                .fold(0.0_f64, |a, v| a.max(v.abs()));
+            assert!(speed > 0.02, "not moving at the retarget: {speed} m/s");
+            assert!(
+                m.settle_time_s.is_some(),
+                "{first:?} -> {second:?} {sampling:?}: {m:?}"
+            );
+            assert_eq!(report.target, second.to_vec());
+        }
+    }
+}
+
+#[test]
+fn a_target_or_start_outside_the_workspace_is_refused_with_the_bound_and_excess() {
+    let config = Config::embedded_default();
+    let mut opts = RunOptions::new(&config, vec![0.02, 0.0, -0.075, 0.0], Sampling::Ideal);
+    let err = format!("{:#}", run(&config, &opts).unwrap_err());
+    assert!(
+        err.contains("capsule 2 at -0.075 m is outside the workspace [-0.06, 0.06] m by 0.0150 m (below the lower bound"),
+        "{err}"
+    );
+    opts.target = vec![0.02, 0.0, 0.03, 0.0];
+    opts.start_m = vec![0.0605, 0.0];
+    let err = format!("{:#}", run(&config, &opts).unwrap_err());
+    assert!(err.contains("start"), "{err}");
+    assert!(err.contains("by 0.0005 m (above the upper bound"), "{err}");
+    opts.start_m = vec![0.0];
+    let err = format!("{:#}", run(&config, &opts).unwrap_err());
+    assert!(err.contains("start has 1 positions"), "{err}");
+}
