@@ -591,6 +591,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             return out;
         }
         self.solver.shift(self.applied_samples);
+        if self.creeping(&e) {
+            // Nearly at rest and still away from the target: the stored
+            // minimum-time plan from here is the best start; a refined plan
+            // that creeps on the quadratic cost can take seconds.
+            self.solver.reset();
+        }
         let report = self.refine_plan(&e);
         out.solve = Some(report);
         if report.status == SolveStatus::OutOfRange {
@@ -662,6 +668,14 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
         }
         report
+    }
+
+    /// Every speed below `REPLAN_SPEED_M_PER_S` while some position error
+    /// exceeds `WAYPOINT_POSITION_M`.
+    fn creeping(&self, e: &[f64; NX]) -> bool {
+        let slow = (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= REPLAN_SPEED_M_PER_S);
+        let away = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > WAYPOINT_POSITION_M);
+        slow && away
     }
 
     /// Enters or leaves the terminal hold (with hysteresis); true inside.
