@@ -57,8 +57,7 @@ fn whole(
     let x = value_s / raster_s;
     let n = x.round();
     if value_s.is_finite()
-        && n >= 0.0
-        && n < 1e15
+        && (0.0..1e15).contains(&n)
         && (x - n).abs() <= RASTER_TOLERANCE.max(1e-12 * x.abs())
     {
         Ok(n as u64)
@@ -373,7 +372,7 @@ pub fn build_sequence(run: &PlayedRun, opts: &SequenceOptions) -> Result<Sequenc
                 });
             }
         }
-        if latest.map_or(true, |p| item.end() > p.end()) {
+        if latest.is_none_or(|p| item.end() > p.end()) {
             latest = Some(*item);
         }
     }
@@ -480,7 +479,7 @@ pub fn build_sequence(run: &PlayedRun, opts: &SequenceOptions) -> Result<Sequenc
                 let gamma = PROTON_GYROMAGNETIC_RATIO_HZ_PER_T;
                 let mut points: Vec<(u64, f64)> = vec![(0, v_start * gamma)];
                 let mut add = |tick: u64, value: f64| {
-                    if points.last().map_or(true, |p| tick > p.0) {
+                    if points.last().is_none_or(|p| tick > p.0) {
                         points.push((tick, value * gamma));
                     }
                 };
