@@ -153,6 +153,8 @@ def check(seq_path, run_path, plot_path=None):
 
 
 def plot(seq, run, tx, gx_t_per_m, starts, adc_blocks, path, u_max):
+    """Overview of the whole sequence, a window around one tracking block, and
+    a zoom on one ramp between two actuation samples."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -160,42 +162,79 @@ def plot(seq, run, tx, gx_t_per_m, starts, adc_blocks, path, u_max):
 
     t = np.asarray(run["t"], dtype=float)
     u = np.asarray(run["u"], dtype=float)
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 6.2), gridspec_kw={"height_ratios": [3, 2]})
-    for b in adc_blocks:
-        s = starts[b] + t[0]
-        top.axvspan(s, s + seq.block_durations[b], color="tab:orange", alpha=0.18, lw=0)
-        block = seq.get_block(b)
-        rf0 = s + block.rf.delay
-        adc0 = s + block.adc.delay
-        top.plot([rf0, rf0 + block.rf.shape_dur], [0.9 * u_max * 1e3] * 2, color="tab:red", lw=3, solid_capstyle="butt")
-        top.plot([adc0, adc0 + block.adc.num_samples * block.adc.dwell], [0.8 * u_max * 1e3] * 2, color="tab:green", lw=3, solid_capstyle="butt")
-    top.step(t, u * 1e3, where="post", color="0.55", lw=1, label="run u(t) (JSON)")
-    top.plot(tx, gx_t_per_m * 1e3, color="tab:blue", lw=1, label="x gradient in the .seq (pypulseq)")
-    top.plot([], [], color="tab:red", lw=3, label="placeholder RF")
-    top.plot([], [], color="tab:green", lw=3, label="placeholder ADC")
-    top.fill_between([], [], color="tab:orange", alpha=0.18, label="tracking block")
-    top.set_ylabel("gradient (mT/m)")
-    top.set_xlim(t[0], t[-1])
-    top.set_ylim(-1.15 * u_max * 1e3, 1.15 * u_max * 1e3)
-    title = f"Exported sequence: scenario {run.get('scenario', '?')}, {run.get('sampling', '?')} sampling, {len(seq.block_events)} blocks"
-    top.set_title(title)
-    top.legend(loc="lower right", fontsize=7, ncol=3)
+    phase = list(run["phase"])
+    mt = 1e3  # T/m -> mT/m
 
-    # Zoom on the largest step between two consecutive actuation samples.
-    steps = np.abs(np.diff(u))
-    k = int(np.argmax(steps)) + 1 if len(steps) else 0
-    tz = t[k]
-    window = 1.2e-3
-    sel = (tx > tz - window) & (tx < tz + window)
-    bottom.step(t, u * 1e3, where="post", color="0.55", lw=1.5, label="run u(t): zero-order hold")
-    bottom.plot(tx[sel], gx_t_per_m[sel] * 1e3, "o-", color="tab:blue", ms=3, lw=1.2, label="x gradient: ramp within the slew limit")
-    bottom.set_xlim(tz - window, tz + window)
-    bottom.set_xlabel("time (s)")
-    bottom.set_ylabel("gradient (mT/m)")
-    bottom.set_title(f"zoom on the largest step, t = {tz:.3f} s", fontsize=9)
-    bottom.legend(loc="best", fontsize=7)
+    fig = plt.figure(figsize=(11, 7.2))
+    grid = fig.add_gridspec(2, 2, height_ratios=[1.15, 1])
+    overview = fig.add_subplot(grid[0, :])
+    window = fig.add_subplot(grid[1, 0])
+    ramp = fig.add_subplot(grid[1, 1])
+
+    def tracking(ax, t0, t1, events):
+        for b in adc_blocks:
+            s = starts[b] + t[0]
+            if s > t1 or s + seq.block_durations[b] < t0:
+                continue
+            ax.axvspan(s, s + seq.block_durations[b], color="tab:orange", alpha=0.18, lw=0)
+            if events:
+                block = seq.get_block(b)
+                rf0, adc0 = s + block.rf.delay, s + block.adc.delay
+                ax.plot([rf0, rf0 + block.rf.shape_dur], [0.9 * u_max * mt] * 2, color="tab:red", lw=5, solid_capstyle="butt")
+                ax.plot([adc0, adc0 + block.adc.num_samples * block.adc.dwell], [0.9 * u_max * mt] * 2, color="tab:green", lw=5, solid_capstyle="butt")
+
+    # Overview.
+    tracking(overview, t[0], t[-1], events=False)
+    overview.step(t, u * mt, where="post", color="0.6", lw=2.2, label="run u(t) (JSON)")
+    overview.plot(tx, gx_t_per_m * mt, color="tab:blue", lw=0.9, label="x gradient read from the .seq by pypulseq")
+    overview.fill_between([], [], color="tab:orange", alpha=0.3, label="tracking block (placeholder RF + ADC)")
+    overview.set_xlim(t[0], t[-1])
+    overview.set_ylim(-1.1 * u_max * mt, 1.1 * u_max * mt)
+    overview.set_ylabel("gradient (mT/m)")
+    overview.set_xlabel("time (s)")
+    overview.set_title(
+        f"Exported sequence: scenario {run.get('scenario', '?')}, {run.get('sampling', '?')} sampling, "
+        f"{len(seq.block_events)} blocks, {len(adc_blocks)} tracking events"
+    )
+    overview.legend(loc="upper right", fontsize=8, ncol=3)
+
+    # A window around one tracking block, after a phase of actuation.
+    later = [starts[b] + t[0] for b in adc_blocks if starts[b] + t[0] > t[0] + 0.2 * (t[-1] - t[0])]
+    centre = later[0] if later else t[0] + 0.5 * (t[-1] - t[0])
+    w0, w1 = centre - 0.05, centre + 0.07
+    tracking(window, w0, w1, events=True)
+    window.step(t, u * mt, where="post", color="0.6", lw=2.2)
+    window.plot(tx, gx_t_per_m * mt, color="tab:blue", lw=1.2)
+    window.plot([], [], color="tab:red", lw=5, label="placeholder RF (hard pulse)")
+    window.plot([], [], color="tab:green", lw=5, label="placeholder ADC")
+    window.set_xlim(w0, w1)
+    window.set_ylim(-1.1 * u_max * mt, 1.1 * u_max * mt)
+    window.set_xlabel("time (s)")
+    window.set_ylabel("gradient (mT/m)")
+    window.set_title("around one tracking block", fontsize=10)
+    window.legend(loc="upper left", fontsize=8)
+
+    # The largest step between two consecutive actuation samples.
+    steps = [
+        (abs(u[k] - u[k - 1]), k)
+        for k in range(1, len(u) - 1)
+        if phase[k] == "actuate" and phase[k - 1] == "actuate" and u[k] != u[k - 1]
+    ]
+    k = max(steps)[1] if steps else int(np.argmax(np.abs(np.diff(u)))) + 1
+    tz, half = t[k], 0.6e-3
+    sel = (tx > tz - 2 * half) & (tx < tz + 2 * half)
+    ramp.step(t, u * mt, where="post", color="0.6", lw=2.2, label="run u(t): zero-order hold")
+    ramp.plot(tx[sel], gx_t_per_m[sel] * mt, "o-", color="tab:blue", ms=4, lw=1.2, label="x gradient: ramp centred on the boundary")
+    ramp.axvline(tz, color="0.3", lw=0.6, ls=":")
+    ramp.set_xlim(tz - half, tz + half)
+    ramp.set_xlabel("time (s)")
+    ramp.set_ylabel("gradient (mT/m)")
+    ramp.set_title(f"largest step between two samples (t = {tz:.2f} s)", fontsize=10)
+    ramp.ticklabel_format(axis="x", useOffset=False)
+    ramp.legend(loc="best", fontsize=8)
+
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 

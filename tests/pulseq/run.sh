@@ -7,8 +7,12 @@
 # cargo target directory. Skips, printing why, only when the Python package
 # index cannot be reached to install it; any other failure fails.
 #
+# Runs: two hand-made runs (the capsule-mpc-pulseq example synthetic_run) and
+# two simulated ones (`capsule-mpc simulate --scenario C --sampling
+# variable|constant --json ... --pulseq ...`).
+#
 # Usage: tests/pulseq/run.sh [--figure]
-#   --figure  also redraw docs/figures/pulseq.png from the simulated run
+#   --figure  also redraw docs/figures/pulseq.png (from the variable-sampling run)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 
@@ -53,7 +57,16 @@ mkdir -p "$OUT"
 echo "== pulseq: hand-made runs (capsule-mpc-pulseq example synthetic_run)"
 cargo run --release --quiet -p capsule-mpc-pulseq --example synthetic_run -- "$OUT"
 
+echo "== pulseq: simulated runs (capsule-mpc simulate --scenario C --pulseq)"
+for sampling in variable constant; do
+    cargo run --release --quiet -- simulate --scenario C --sampling "$sampling" \
+        --json "$OUT/run-C-$sampling.json" --pulseq "$OUT/run-C-$sampling.seq"
+done
+
+# The first pair is the one --figure draws (docs/figures/pulseq.png).
 pairs=(
+    "$OUT/run-C-variable.seq" "$OUT/run-C-variable.json"
+    "$OUT/run-C-constant.seq" "$OUT/run-C-constant.json"
     "$OUT/synthetic-ideal.seq" "$OUT/synthetic-ideal.json"
     "$OUT/synthetic-constant.seq" "$OUT/synthetic-constant.json"
 )
