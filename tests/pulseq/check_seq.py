@@ -172,6 +172,7 @@ def plot(seq, run, tx, gx_t_per_m, starts, adc_blocks, path, u_max):
     ramp = fig.add_subplot(grid[1, 1])
 
     def tracking(ax, t0, t1, events):
+        labelled = False
         for b in adc_blocks:
             s = starts[b] + t[0]
             if s > t1 or s + seq.block_durations[b] < t0:
@@ -181,7 +182,14 @@ def plot(seq, run, tx, gx_t_per_m, starts, adc_blocks, path, u_max):
                 block = seq.get_block(b)
                 rf0, adc0 = s + block.rf.delay, s + block.adc.delay
                 ax.plot([rf0, rf0 + block.rf.shape_dur], [0.9 * u_max * mt] * 2, color="tab:red", lw=5, solid_capstyle="butt")
-                ax.plot([adc0, adc0 + block.adc.num_samples * block.adc.dwell], [0.9 * u_max * mt] * 2, color="tab:green", lw=5, solid_capstyle="butt")
+                adc1 = adc0 + block.adc.num_samples * block.adc.dwell
+                ax.plot([adc0, adc1], [0.9 * u_max * mt] * 2, color="tab:green", lw=5, solid_capstyle="butt")
+                if not labelled:
+                    ax.annotate("placeholder RF", (rf0, 0.9 * u_max * mt), xytext=(rf0, 1.1 * u_max * mt),
+                                fontsize=8, color="tab:red", ha="right", arrowprops={"arrowstyle": "-", "color": "tab:red"})
+                    ax.annotate("placeholder ADC", (0.5 * (adc0 + adc1), 0.9 * u_max * mt), xytext=(adc1, 1.1 * u_max * mt),
+                                fontsize=8, color="tab:green", ha="left", arrowprops={"arrowstyle": "-", "color": "tab:green"})
+                    labelled = True
 
     # Overview.
     tracking(overview, t[0], t[-1], events=False)
@@ -205,14 +213,11 @@ def plot(seq, run, tx, gx_t_per_m, starts, adc_blocks, path, u_max):
     tracking(window, w0, w1, events=True)
     window.step(t, u * mt, where="post", color="0.6", lw=2.2)
     window.plot(tx, gx_t_per_m * mt, color="tab:blue", lw=1.2)
-    window.plot([], [], color="tab:red", lw=5, label="placeholder RF (hard pulse)")
-    window.plot([], [], color="tab:green", lw=5, label="placeholder ADC")
     window.set_xlim(w0, w1)
-    window.set_ylim(-1.1 * u_max * mt, 1.1 * u_max * mt)
+    window.set_ylim(-1.1 * u_max * mt, 1.3 * u_max * mt)
     window.set_xlabel("time (s)")
     window.set_ylabel("gradient (mT/m)")
     window.set_title("around one tracking block", fontsize=10)
-    window.legend(loc="upper left", fontsize=8)
 
     # The largest step between two consecutive actuation samples.
     steps = [
