@@ -48,6 +48,14 @@ pub fn played_run(
     sample_time_s: f64,
     tracking_time_s: f64,
 ) -> Result<PlayedRun> {
+    for (name, value) in [
+        ("sample time", sample_time_s),
+        ("tracking time", tracking_time_s),
+    ] {
+        if !(value.is_finite() && value > 0.0) {
+            bail!("the {name} {value} s must be positive and finite");
+        }
+    }
     let (t, u, phase) = (&report.t, &report.u, &report.phase);
     if t.is_empty() || t.len() != u.len() || t.len() != phase.len() {
         bail!(
@@ -83,13 +91,13 @@ pub fn played_run(
                 "actuation from {t0} s to {t1} s is not a whole number of {sample_time_s} s samples"
             );
         }
+        // Rows are in time order: walk them once, sample by sample.
+        let mut r = start;
         for j in 0..samples as usize {
             let s0 = t0 + j as f64 * sample_time_s;
-            let rows = (start..k).filter(|&r| {
-                t[r] >= s0 - TIME_TOLERANCE_S && t[r] < s0 + sample_time_s - TIME_TOLERANCE_S
-            });
+            let s1 = s0 + sample_time_s;
             let mut gradient = None;
-            for r in rows {
+            while r < k && t[r] < s1 - TIME_TOLERANCE_S {
                 match gradient {
                     None => gradient = Some(u[r]),
                     Some(g) if g != u[r] => {
@@ -97,6 +105,7 @@ pub fn played_run(
                     }
                     _ => {}
                 }
+                r += 1;
             }
             let gradient_t_per_m =
                 gradient.with_context(|| format!("no row of the run at the sample at {s0} s"))?;
@@ -113,12 +122,12 @@ pub fn played_run(
             continue;
         }
         let end = m.t_s + tracking_time_s;
-        let rows_track = t
-            .iter()
-            .zip(phase)
-            .take(last)
-            .filter(|(&tr, _)| tr >= m.t_s - TIME_TOLERANCE_S && tr < end - TIME_TOLERANCE_S)
-            .all(|(_, &p)| p == Phase::Track);
+        // The rows from the measurement to the end of its tracking time.
+        let from = t.partition_point(|&tr| tr < m.t_s - TIME_TOLERANCE_S);
+        let to = t
+            .partition_point(|&tr| tr < end - TIME_TOLERANCE_S)
+            .min(last);
+        let rows_track = from < to && phase[from..to].iter().all(|&p| p == Phase::Track);
         if !rows_track || m.available_s < end - TIME_TOLERANCE_S {
             bail!(
                 "the measurement at {} s is not followed by {tracking_time_s} s of tracking in the run",

@@ -71,6 +71,7 @@ fn whole(
     }
 }
 
+/// `value` must be finite and in `(lo, hi]`.
 fn check_range(name: &'static str, value: f64, lo: f64, hi: f64) -> Result<(), PulseqError> {
     if value.is_finite() && value > lo && value <= hi {
         Ok(())
@@ -82,6 +83,23 @@ fn check_range(name: &'static str, value: f64, lo: f64, hi: f64) -> Result<(), P
         })
     }
 }
+
+/// `value` must be finite and in `[0, hi]`.
+fn check_non_negative(name: &'static str, value: f64, hi: f64) -> Result<(), PulseqError> {
+    if value.is_finite() && (0.0..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(PulseqError::InvalidSetting {
+            name,
+            value,
+            reason: format!("allowed range is [0, {hi:e}]"),
+        })
+    }
+}
+
+/// Most RF raster samples the placeholder pulse may have (its shape is
+/// stored sample by sample before compression).
+const MAX_RF_SAMPLES: u64 = 1_000_000;
 
 /// A number as the file writes it: exact (shortest round-trip form), without
 /// an exponent for ordinary magnitudes, `0` for both zeros.
@@ -176,14 +194,14 @@ fn validate(opts: &SequenceOptions) -> Result<(), PulseqError> {
         0.0,
         1e5,
     )?;
-    check_range("gradient_raster_s", l.gradient_raster_s, 0.0, 1e-3)?;
+    check_range("gradient_raster_s", l.gradient_raster_s, 1e-7, 1e-3)?;
     check_range(
         "block_duration_raster_s",
         l.block_duration_raster_s,
         0.0,
         1e-3,
     )?;
-    check_range("rf_raster_s", l.rf_raster_s, 0.0, 1e-4)?;
+    check_range("rf_raster_s", l.rf_raster_s, 1e-9, 1e-4)?;
     check_range("adc_raster_s", l.adc_raster_s, 1e-10, 1e-4)?;
     let t = &opts.tracking;
     check_range("tracking.rf_duration_s", t.rf_duration_s, 0.0, 1.0)?;
@@ -195,8 +213,8 @@ fn validate(opts: &SequenceOptions) -> Result<(), PulseqError> {
         0.0,
         f64::from(u32::MAX),
     )?;
-    check_range("tracking.rf_delay_s", t.rf_delay_s, -1e-30, 1.0)?;
-    check_range("tracking.rf_to_adc_s", t.rf_to_adc_s, -1e-30, 1.0)?;
+    check_non_negative("tracking.rf_delay_s", t.rf_delay_s, 1.0)?;
+    check_non_negative("tracking.rf_to_adc_s", t.rf_to_adc_s, 1.0)?;
     Ok(())
 }
 
@@ -220,6 +238,15 @@ fn tracking_events(opts: &SequenceOptions) -> Result<TrackingEvents, PulseqError
         l.rf_raster_s,
         "RF raster",
     )?;
+    if !(1..=MAX_RF_SAMPLES).contains(&rf_samples) {
+        return Err(PulseqError::InvalidSetting {
+            name: "tracking.rf_duration_s",
+            value: t.rf_duration_s,
+            reason: format!(
+                "{rf_samples} RF raster samples; between 1 and {MAX_RF_SAMPLES} are allowed"
+            ),
+        });
+    }
     let rf_delay_us = whole(
         || "tracking.rf_delay_s".into(),
         t.rf_delay_s,
@@ -459,7 +486,8 @@ pub fn build_sequence(run: &PlayedRun, opts: &SequenceOptions) -> Result<Sequenc
                     Some(b) => (ramp_ticks((b - u).abs() / 2.0), (u + b) / 2.0, b),
                     None => (ramp_ticks(u.abs()), 0.0, 0.0),
                 };
-                if in_ticks + out_ticks > item.ticks {
+                let ramp_total = in_ticks.saturating_add(out_ticks);
+                if ramp_total > item.ticks {
                     return Err(PulseqError::SlewRate {
                         index,
                         start_s: run.samples[index].start_s,
@@ -467,7 +495,7 @@ pub fn build_sequence(run: &PlayedRun, opts: &SequenceOptions) -> Result<Sequenc
                         from_t_per_m: from,
                         to_t_per_m: to,
                         slew_rate_t_per_m_per_s: limits.slew_rate_t_per_m_per_s,
-                        needed_s: (in_ticks + out_ticks) as f64 * raster,
+                        needed_s: ramp_total as f64 * raster,
                         sample_s: item.ticks as f64 * raster,
                     });
                 }
@@ -558,7 +586,7 @@ pub fn build_sequence(run: &PlayedRun, opts: &SequenceOptions) -> Result<Sequenc
     let _ = writeln!(text, "CapsuleMpcSampleTimeS {}", num(run.sample_time_s));
     let _ = writeln!(
         text,
-        "CapsuleMpcTrackingPlaceholder hard_rf_{}_s_{}_deg_adc_{}_samples_{}_s",
+        "CapsuleMpcTrackingPlaceholder hard RF pulse of {} s and {} deg, then ADC of {} samples over {} s",
         num(t.rf_duration_s),
         num(t.flip_angle_deg),
         t.adc_samples,

@@ -619,6 +619,24 @@ fn invalid_settings_are_named() {
         );
         assert!(err.to_string().contains(name));
     }
+    // Absurd values are errors, not huge allocations or overflows.
+    let mut opts = options();
+    opts.limits.rf_raster_s = 1e-8;
+    opts.tracking.rf_duration_s = 0.5;
+    let err = build_sequence(&constant_run(&[0.01], 1), &opts).unwrap_err();
+    assert!(err.to_string().contains("tracking.rf_duration_s"), "{err}");
+    let mut opts = options();
+    opts.limits.slew_rate_t_per_m_per_s = 1e-300;
+    let err = build_sequence(&run, &opts).unwrap_err();
+    assert!(
+        matches!(err, PulseqError::SlewRate { index: 0, .. }),
+        "{err:?}"
+    );
+    let mut opts = options();
+    opts.tracking.rf_delay_s = -1e-6;
+    let err = build_sequence(&run, &opts).unwrap_err();
+    assert!(err.to_string().contains("tracking.rf_delay_s"), "{err}");
+
     // An RF pulse off the RF raster.
     let mut opts = options();
     opts.tracking.rf_duration_s = 1.0005e-3 + 0.2e-6;
