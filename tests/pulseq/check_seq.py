@@ -206,9 +206,10 @@ def plot(seq, run, tx, gx_t_per_m, starts, adc_blocks, path, u_max):
     )
     overview.legend(loc="upper right", fontsize=8, ncol=3)
 
-    # A window around one tracking block, after a phase of actuation.
-    later = [starts[b] + t[0] for b in adc_blocks if starts[b] + t[0] > t[0] + 0.2 * (t[-1] - t[0])]
-    centre = later[0] if later else t[0] + 0.5 * (t[-1] - t[0])
+    # A window around the tracking block that follows the strongest gradient.
+    track_starts = [starts[b] + t[0] for b in adc_blocks]
+    before = [abs(u[max(int(np.searchsorted(t, s)) - 1, 0)]) for s in track_starts]
+    centre = track_starts[int(np.argmax(before))] if track_starts else t[0] + 0.5 * (t[-1] - t[0])
     w0, w1 = centre - 0.05, centre + 0.07
     tracking(window, w0, w1, events=True)
     window.step(t, u * mt, where="post", color="0.6", lw=2.2)
@@ -236,7 +237,7 @@ def plot(seq, run, tx, gx_t_per_m, starts, adc_blocks, path, u_max):
     ramp.set_ylabel("gradient (mT/m)")
     ramp.set_title(f"largest step between two samples (t = {tz:.2f} s)", fontsize=10)
     ramp.ticklabel_format(axis="x", useOffset=False)
-    ramp.legend(loc="best", fontsize=8)
+    ramp.legend(loc="upper left" if u[k] > u[k - 1] else "lower left", fontsize=8)
 
     fig.tight_layout()
     fig.savefig(path, dpi=100)
