@@ -166,6 +166,10 @@ pub struct SimulateArgs {
     /// Write plots into this directory.
     #[arg(long, value_name = "DIR")]
     pub plot: Option<PathBuf>,
+    /// Write the run as played as a Pulseq 1.4 sequence (x gradient per
+    /// sample, placeholder tracking events) here; see README, "Export to Pulseq".
+    #[arg(long, value_name = "FILE.seq")]
+    pub pulseq: Option<PathBuf>,
     /// Which generated controller: the product's (`default`) or the paper's NMPC.
     #[arg(long, value_enum, default_value = "default")]
     pub preset: PresetArg,

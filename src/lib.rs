@@ -11,9 +11,12 @@
 //!   `generate`, `bench`, `figures`);
 //! * [`bench`](mod@bench): timing of the online step and the peer solvers (clarabel,
 //!   OSQP, OpEn) on the same states;
-//! * [`figures`]: the report's figures and the plot of one run (plotters).
+//! * [`figures`]: the report's figures and the plot of one run (plotters);
+//! * [`pulseq_export`]: `simulate --pulseq`, the played run of a report
+//!   written as a Pulseq sequence (`capsule_mpc_pulseq`).
 
 pub mod bench;
 pub mod cli;
 pub mod cmd;
 pub mod figures;
+pub mod pulseq_export;

@@ -134,9 +134,58 @@ pub struct ScannerConfig {
     /// Compute/transfer delay after tracking before a measurement is usable, s.
     #[serde(default)]
     pub extra_delay_s: f64,
-    /// Gradient slew-rate limit, T/m/s (None: ideal steps).
+    /// Gradient slew-rate limit, T/m/s. The simulation plays ideal steps; the
+    /// Pulseq export ramps within this limit (default
+    /// [`DEFAULT_SLEW_RATE_T_PER_M_PER_S`] when absent).
     #[serde(default)]
     pub slew_rate_t_per_m_per_s: Option<f64>,
+    /// Gradient raster of the scanner, s, used by the Pulseq export (default
+    /// [`DEFAULT_GRADIENT_RASTER_S`]). Absent from the canonical JSON (and so
+    /// from the config hash) unless set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gradient_raster_s: Option<f64>,
+    /// Length of the RF excitation of the placeholder tracking event in the
+    /// Pulseq export, s (default [`DEFAULT_TRACKING_RF_DURATION_S`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracking_rf_duration_s: Option<f64>,
+    /// Length of the ADC readout of the placeholder tracking event in the
+    /// Pulseq export, s (default [`DEFAULT_TRACKING_ADC_DURATION_S`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracking_adc_duration_s: Option<f64>,
+}
+
+/// Slew-rate limit assumed when `scanner.slew_rate_t_per_m_per_s` is absent, T/m/s.
+pub const DEFAULT_SLEW_RATE_T_PER_M_PER_S: f64 = 200.0;
+/// Gradient raster assumed when `scanner.gradient_raster_s` is absent, s.
+pub const DEFAULT_GRADIENT_RASTER_S: f64 = 10e-6;
+/// Placeholder tracking RF length when `scanner.tracking_rf_duration_s` is absent, s.
+pub const DEFAULT_TRACKING_RF_DURATION_S: f64 = 1e-3;
+/// Placeholder tracking ADC length when `scanner.tracking_adc_duration_s` is absent, s.
+pub const DEFAULT_TRACKING_ADC_DURATION_S: f64 = 10.24e-3;
+
+impl ScannerConfig {
+    /// The slew-rate limit, T/m/s: the configured one or the default.
+    pub fn slew_rate_or_default_t_per_m_per_s(&self) -> f64 {
+        self.slew_rate_t_per_m_per_s
+            .unwrap_or(DEFAULT_SLEW_RATE_T_PER_M_PER_S)
+    }
+
+    /// The gradient raster, s: the configured one or the default.
+    pub fn gradient_raster_or_default_s(&self) -> f64 {
+        self.gradient_raster_s.unwrap_or(DEFAULT_GRADIENT_RASTER_S)
+    }
+
+    /// The placeholder tracking RF length, s: the configured one or the default.
+    pub fn tracking_rf_duration_or_default_s(&self) -> f64 {
+        self.tracking_rf_duration_s
+            .unwrap_or(DEFAULT_TRACKING_RF_DURATION_S)
+    }
+
+    /// The placeholder tracking ADC length, s: the configured one or the default.
+    pub fn tracking_adc_duration_or_default_s(&self) -> f64 {
+        self.tracking_adc_duration_s
+            .unwrap_or(DEFAULT_TRACKING_ADC_DURATION_S)
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -471,6 +520,37 @@ impl Config {
         if let Some(slew) = s.slew_rate_t_per_m_per_s {
             check_range("scanner.slew_rate_t_per_m_per_s", slew, 0.0, true, 1e6)?;
         }
+        if let Some(raster) = s.gradient_raster_s {
+            check_range("scanner.gradient_raster_s", raster, 0.0, true, 1e-3)?;
+        }
+        if let Some(rf) = s.tracking_rf_duration_s {
+            check_range("scanner.tracking_rf_duration_s", rf, 0.0, true, 0.1)?;
+        }
+        if let Some(adc) = s.tracking_adc_duration_s {
+            check_range("scanner.tracking_adc_duration_s", adc, 0.0, true, 0.1)?;
+        }
+        if s.tracking_rf_duration_s.is_some() || s.tracking_adc_duration_s.is_some() {
+            // The placeholder tracking event (RF, then ADC) must fit in the
+            // tracking phase; the Pulseq writer also checks its fixed gaps.
+            let (rf, adc) = (
+                s.tracking_rf_duration_or_default_s(),
+                s.tracking_adc_duration_or_default_s(),
+            );
+            if rf + adc >= s.tracking_time_s {
+                let field = if s.tracking_adc_duration_s.is_some() {
+                    "scanner.tracking_adc_duration_s"
+                } else {
+                    "scanner.tracking_rf_duration_s"
+                };
+                return Err(invalid(
+                    field,
+                    format!(
+                        "the placeholder tracking RF ({rf} s) and ADC ({adc} s) together must be shorter than scanner.tracking_time_s ({} s)",
+                        s.tracking_time_s
+                    ),
+                ));
+            }
+        }
 
         let c = &self.controller;
         check_range("controller.sample_time_s", c.sample_time_s, 0.0, true, 1.0)?;
@@ -686,6 +766,77 @@ mod tests {
             .unwrap();
         let e = Config::from_toml_str(&text).unwrap_err();
         assert!(e.to_string().contains("`capsule`"), "{e}");
+    }
+
+    #[test]
+    fn scanner_export_fields_default_without_changing_the_canonical_json() {
+        let c = Config::embedded_default();
+        let s = &c.scanner;
+        assert_eq!(s.gradient_raster_s, None);
+        assert_eq!(s.slew_rate_or_default_t_per_m_per_s(), 200.0);
+        assert_eq!(s.gradient_raster_or_default_s(), 10e-6);
+        assert_eq!(s.tracking_rf_duration_or_default_s(), 1e-3);
+        assert_eq!(s.tracking_adc_duration_or_default_s(), 10.24e-3);
+        let json = serde_json::to_string(&c).unwrap();
+        for key in [
+            "gradient_raster_s",
+            "tracking_rf_duration_s",
+            "tracking_adc_duration_s",
+        ] {
+            assert!(!json.contains(key), "{key} in {json}");
+        }
+
+        let set = with(|t| {
+            t.replacen(
+                "extra_delay_s = 0.0",
+                "extra_delay_s = 0.0\nslew_rate_t_per_m_per_s = 150.0\ngradient_raster_s = 4e-6\ntracking_rf_duration_s = 5e-4\ntracking_adc_duration_s = 8e-3",
+                1,
+            )
+        })
+        .unwrap();
+        let s = &set.scanner;
+        assert_eq!(s.slew_rate_or_default_t_per_m_per_s(), 150.0);
+        assert_eq!(s.gradient_raster_or_default_s(), 4e-6);
+        assert_eq!(s.tracking_rf_duration_or_default_s(), 5e-4);
+        assert_eq!(s.tracking_adc_duration_or_default_s(), 8e-3);
+        assert!(serde_json::to_string(&set)
+            .unwrap()
+            .contains("\"gradient_raster_s\":4e-6"));
+    }
+
+    #[test]
+    fn scanner_export_fields_are_validated_by_name() {
+        for (line, field) in [
+            ("gradient_raster_s = 0.0", "scanner.gradient_raster_s"),
+            ("gradient_raster_s = 0.01", "scanner.gradient_raster_s"),
+            (
+                "tracking_rf_duration_s = -1e-3",
+                "scanner.tracking_rf_duration_s",
+            ),
+            (
+                "tracking_adc_duration_s = nan",
+                "scanner.tracking_adc_duration_s",
+            ),
+            (
+                "tracking_adc_duration_s = 0.019",
+                "scanner.tracking_adc_duration_s",
+            ),
+            (
+                "tracking_rf_duration_s = 0.015",
+                "scanner.tracking_rf_duration_s",
+            ),
+        ] {
+            let e = with(|t| {
+                t.replacen(
+                    "extra_delay_s = 0.0",
+                    &format!("extra_delay_s = 0.0\n{line}"),
+                    1,
+                )
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains(field), "{line}: {e}");
+        }
     }
 
     #[test]

@@ -61,6 +61,18 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if let Some(path) = &args.json {
         report.write_json(path)?;
     }
+    if let Some(path) = &args.pulseq {
+        let seq = crate::pulseq_export::write_pulseq(path, &report, &config)?;
+        println!(
+            "wrote {} ({} blocks: {} actuation, {} tracking, {} pause; {:.3} s)",
+            path.display(),
+            seq.blocks,
+            seq.actuation_blocks,
+            seq.tracking_blocks,
+            seq.delay_blocks,
+            seq.duration_s
+        );
+    }
     if let Some(dir) = &args.plot {
         for path in plot_run(&report, dir)? {
             println!("wrote {}", path.display());
