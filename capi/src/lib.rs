@@ -55,6 +55,7 @@ pub const CAPSULE_MPC_STATUS_MEASUREMENT_LOST: i32 = RuntimeStatus::MeasurementL
 pub const CAPSULE_MPC_STATUS_NO_TARGET: i32 = RuntimeStatus::NoTarget as i32;
 pub const CAPSULE_MPC_STATUS_REACQUIRED: i32 = RuntimeStatus::Reacquired as i32;
 pub const CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP: i32 = RuntimeStatus::AboveIterationMap as i32;
+pub const CAPSULE_MPC_STATUS_RECOVERING: i32 = RuntimeStatus::Recovering as i32;
 
 const M: usize = <Solver as PlanSolver<NX, K>>::M;
 const NX: usize = capsule_mpc_runtime::generated::controller::spec::NX;

@@ -121,6 +121,7 @@ fn rust_consts(src: &str) -> BTreeMap<String, i64> {
             "CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP" => {
                 CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP.into()
             }
+            "CAPSULE_MPC_STATUS_RECOVERING" => CAPSULE_MPC_STATUS_RECOVERING.into(),
             _ => panic!("no evaluator for {name}: add it to tests/header.rs"),
         }
     };

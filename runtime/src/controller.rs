@@ -128,7 +128,7 @@ pub const REACQUIRE_AFTER_REJECTIONS: usize = 5;
 pub const GLITCH_FRAMES: usize = 20;
 /// Accepted frames after which an estimate counts as established (see
 /// `ControllerSettings::glitch_frames`).
-pub const ESTABLISHED_AFTER_FRAMES: usize = 3;
+pub const ESTABLISHED_AFTER_FRAMES: usize = 2;
 
 /// Largest gap between the end of one actuation phase and the start of
 /// the next that `Controller::cycle_at` accepts, s. Tracking phases are
@@ -148,15 +148,30 @@ pub const GAP_SMOOTHING: f64 = 0.3;
 pub const REST_SPEED_M_PER_S: f64 = 5.0e-3;
 /// Coasting horizon the fallback's braking law minimizes the drift over, s.
 pub const BRAKING_HORIZON_S: f64 = 1.0;
+/// Recovery legs (`RuntimeStatus::Recovering`): the relative positions
+/// searched for an intermediate target, per capsule, span
+/// +-`RECOVERY_LEG_RANGE_M` in steps of `RECOVERY_LEG_STEP_M` (the default
+/// tables' plan grid).
+pub const RECOVERY_LEG_RANGE_M: f64 = 0.04;
+/// See `RECOVERY_LEG_RANGE_M`, m.
+pub const RECOVERY_LEG_STEP_M: f64 = 0.005;
+/// A recovery leg ends when every position is within this of its
+/// intermediate target and every speed below `REST_SPEED_M_PER_S`, m.
+pub const RECOVERY_LEG_REACHED_M: f64 = 3.0e-3;
 /// After re-acquisition the estimate it replaced is kept as an alternative
 /// (a frame glitch re-acquires onto the glitch; when true frames return
 /// they match the replaced estimate) until its position uncertainty
 /// exceeds this, m.
 pub const REPLACED_TRACK_MAX_STD_M: f64 = 5.0e-3;
 
+/// An accepted frame whose normalized innovation squared (summed over the
+/// capsules) exceeds this (3 sigma) keeps the estimate before it as the
+/// replaced track (see `REPLACED_TRACK_MAX_STD_M`).
+pub const REPLACED_TRACK_NIS: f64 = 9.0;
+
 /// Normalized innovation squared above which a measurement is rejected
 /// (10 sigma: only gross outliers and wrong data).
-pub const MEASUREMENT_GATE_NIS: f64 = 100.0;
+pub const MEASUREMENT_GATE_NIS: f64 = 25.0;
 /// Positions farther than this from the origin are not physical, m.
 pub const MAX_ABS_POSITION_M: f64 = 1.0;
 /// Speeds above this are not physical, m/s (terminal speeds at u_max: 0.23
@@ -194,6 +209,11 @@ pub enum RuntimeStatus {
     /// plan converged and is used, but the state lies outside what the
     /// offline worst-case timing covered.
     AboveIterationMap = 7,
+    /// The state was outside the tables' range at rest (after the fallback
+    /// braked it): the controller is moving the capsules along a stored plan
+    /// to an intermediate point from which the tables reach the target
+    /// (one or more legs), then plans to the target itself.
+    Recovering = 8,
 }
 
 /// Errors of calls with bad arguments (nothing changes when one is returned).
@@ -267,6 +287,10 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     /// Frames accepted since the last `reset` or re-acquisition (see
     /// `ControllerSettings::glitch_frames`).
     confirmed_frames: usize,
+    /// Intermediate target of the current recovery leg (see
+    /// `RuntimeStatus::Recovering`), absolute, speeds 0.
+    waypoint: [f64; NX],
+    has_waypoint: bool,
     /// End of the last actuation phase on the host's clock, s (`cycle_at`;
     /// None before the first timed cycle, after `reset` and after `cycle`).
     actuation_end_s: Option<f64>,
@@ -317,6 +341,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             replaced: [CapsuleFilter::new(0.0, 0.0); NX],
             has_replaced: false,
             confirmed_frames: 0,
+            waypoint: [0.0; NX],
+            has_waypoint: false,
             actuation_end_s: None,
             gap_s: settings.wait_s(),
         };
@@ -341,6 +367,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.candidate_frames = 0;
         self.has_replaced = false;
         self.confirmed_frames = 0;
+        self.has_waypoint = false;
         // A new start: the host's clock restarts too.
         self.actuation_end_s = None;
         self.restart_plan();
@@ -412,6 +439,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
         self.target = *target;
         self.has_target = true;
+        self.has_waypoint = false;
         self.restart_plan();
         Ok(())
     }
@@ -607,13 +635,28 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// gated out (counted towards re-acquisition), or re-acquired.
     fn fuse(&mut self, z: &[f64]) -> RuntimeStatus {
         let r = sq(self.settings.position_noise_m.max(1e-6));
-        match self.classify_measurement(z) {
+        let mut class = self.classify_measurement(z);
+        if class == Measurement::Accepted && self.continues_candidate(z, r) {
+            // The estimate's gate has widened while it predicted through
+            // the gated-out frames; a frame that carries on their sequence
+            // belongs to it, not to the estimate.
+            class = Measurement::GatedOut;
+        }
+        match class {
             Measurement::Invalid => RuntimeStatus::MeasurementRejected,
             Measurement::Accepted => {
                 self.gated_rejections = 0;
                 self.candidate_frames = 0;
                 self.confirmed_frames = self.confirmed_frames.saturating_add(1);
-                update_filters(&mut self.filters[..NX / 2], z, r);
+                let m = NX / 2;
+                if !self.has_replaced && nis(&self.filters[..m], z, r) > REPLACED_TRACK_NIS {
+                    // A frame that pulls the estimate far (behind a gate
+                    // widened by long open-loop phases) may be the first of
+                    // a glitch: keep the estimate it pulls away from.
+                    self.replaced = self.filters;
+                    self.has_replaced = true;
+                }
+                update_filters(&mut self.filters[..m], z, r);
                 RuntimeStatus::Ok
             }
             Measurement::GatedOut => {
@@ -648,6 +691,16 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
     }
 
+    /// Whether frame `z` carries on the run of gated-out frames: the
+    /// candidate has seen at least two (so it knows their speed) and `z`
+    /// fits it better than the estimate.
+    fn continues_candidate(&self, z: &[f64], r: f64) -> bool {
+        let m = NX / 2;
+        self.candidate_frames >= 2
+            && within_gate(&self.candidate[..m], z, r)
+            && nis(&self.candidate[..m], z, r) < nis(&self.filters[..m], z, r)
+    }
+
     /// Feeds a gated-out frame to the re-acquisition candidate: fused when
     /// it agrees with the frames before it, else the candidate restarts at
     /// it (position at the frame, speed zero with a wide uncertainty, so
@@ -671,6 +724,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.gated_rejections = 0;
         self.candidate_frames = 0;
         self.confirmed_frames = 0;
+        // A leg chosen from the old estimate means nothing now.
+        self.has_waypoint = false;
         self.restart_plan();
     }
 
@@ -731,7 +786,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             out.status = RuntimeStatus::NoTarget;
             return out;
         }
-        let e = self.relative(x, &self.target);
+        self.advance_recovery(x);
+        let goal = if self.has_waypoint {
+            self.waypoint
+        } else {
+            self.target
+        };
+        let e = self.relative(x, &goal);
         if self.update_hold(&e) {
             out.gradients_t_per_m[0] = self.hold_gradient(&e);
             self.applied_samples = 0;
@@ -744,9 +805,16 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
             out.status = RuntimeStatus::Fallback;
             self.applied_samples = 0;
-            // No plan: the next cycle looks the (braked) state up again.
+            // No plan: the next cycle looks the (braked) state up again,
+            // or, once at rest, starts a recovery leg.
             self.restart_plan();
+            if at_rest(x) {
+                self.start_recovery_leg(x);
+            }
             return out;
+        }
+        if self.has_waypoint && out.status == RuntimeStatus::Ok {
+            out.status = RuntimeStatus::Recovering;
         }
         if report.status == SolveStatus::IterationLimit && out.status == RuntimeStatus::Ok {
             out.status = RuntimeStatus::IterationLimit;
@@ -775,6 +843,77 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.update_schedule();
         }
         out
+    }
+
+    /// Starts a recovery leg from the rest state `x` outside the tables'
+    /// range: the intermediate target W (speeds 0) such that the tables
+    /// cover a start at rest at `x - W` and W is as close to the target as
+    /// such a W can be (relative positions searched on a grid, see
+    /// `RECOVERY_LEG_RANGE_M`). Without a W closer to the target than `x`,
+    /// nothing starts (the fallback goes on holding still).
+    fn start_recovery_leg(&mut self, x: &[f64; NX]) {
+        let m = NX / 2;
+        let steps = libm::round(RECOVERY_LEG_RANGE_M / RECOVERY_LEG_STEP_M) as usize;
+        let per_axis = 2 * steps + 1;
+        // Mixed-radix enumeration over the capsules' relative positions,
+        // bounded for large capsule counts (coarser grids).
+        let mut stride = 1usize;
+        while per_axis.div_ceil(stride).saturating_pow(m as u32) > RECOVERY_LEG_CANDIDATES {
+            stride += 1;
+        }
+        let axis = per_axis.div_ceil(stride);
+        let total = axis.saturating_pow(m as u32);
+        let current = self.relative(x, &self.target);
+        let distance2 =
+            |e: &[f64; NX]| -> f64 { (0..m).map(|i| sq(current[2 * i] - e[2 * i])).sum::<f64>() };
+        let mut best_e = [0.0; NX];
+        let mut best = distance2(&[0.0; NX]) - sq(RECOVERY_LEG_STEP_M);
+        let mut found = false;
+        for index in 0..total {
+            let mut e = [0.0; NX];
+            let mut rest = index;
+            for i in 0..m {
+                let k = (rest % axis) * stride;
+                rest /= axis;
+                e[2 * i] = (k as f64 - steps as f64) * RECOVERY_LEG_STEP_M;
+            }
+            let d = distance2(&e);
+            if d < best && S::covers_from_rest(&e) {
+                best = d;
+                best_e = e;
+                found = true;
+            }
+        }
+        if found {
+            for i in 0..m {
+                self.waypoint[2 * i] = x[2 * i] - best_e[2 * i];
+                self.waypoint[2 * i + 1] = 0.0;
+            }
+            self.has_waypoint = true;
+            self.restart_plan();
+        }
+    }
+
+    /// Ends the current recovery leg once its intermediate target is
+    /// reached at rest (`RECOVERY_LEG_REACHED_M`): the plan restarts for the
+    /// target, or for the next leg when the tables do not cover the target
+    /// from here.
+    fn advance_recovery(&mut self, x: &[f64; NX]) {
+        if !self.has_waypoint {
+            return;
+        }
+        let reached = (0..NX / 2).all(|i| {
+            libm::fabs(x[2 * i] - self.waypoint[2 * i]) <= RECOVERY_LEG_REACHED_M
+                && libm::fabs(x[2 * i + 1]) <= REST_SPEED_M_PER_S
+        });
+        if !reached {
+            return;
+        }
+        self.has_waypoint = false;
+        self.restart_plan();
+        if !S::covers_from_rest(&self.relative(x, &self.target)) {
+            self.start_recovery_leg(x);
+        }
     }
 
     /// Refines the plan from `e`: one solve (SQP_ITERATIONS Gauss-Newton
@@ -924,6 +1063,14 @@ enum Measurement {
     GatedOut,
 }
 
+/// Most intermediate targets one recovery leg search looks at.
+const RECOVERY_LEG_CANDIDATES: usize = 4096;
+
+/// Every capsule's speed within `REST_SPEED_M_PER_S`.
+fn at_rest<const NX: usize>(x: &[f64; NX]) -> bool {
+    (0..NX / 2).all(|i| libm::fabs(x[2 * i + 1]) <= REST_SPEED_M_PER_S)
+}
+
 /// `WrongLength("measured_positions_m")` unless a frame has M positions.
 fn check_frame_length<const NX: usize>(z: Option<&[f64]>) -> Result<(), RuntimeError> {
     match z {
@@ -939,6 +1086,16 @@ fn within_gate(filters: &[CapsuleFilter], z: &[f64], r_m2: f64) -> bool {
         let innovation = zi - f.mean[0];
         innovation * innovation / (f.cov[0] + r_m2) <= MEASUREMENT_GATE_NIS
     })
+}
+
+/// Normalized innovation squared of frame `z` against `filters`, summed
+/// over the capsules.
+fn nis(filters: &[CapsuleFilter], z: &[f64], r_m2: f64) -> f64 {
+    filters
+        .iter()
+        .zip(z)
+        .map(|(f, &zi)| sq(zi - f.mean[0]) / (f.cov[0] + r_m2))
+        .sum()
 }
 
 /// Measurement update of every capsule's filter with frame `z`.
@@ -976,7 +1133,7 @@ pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     x: &[f64; NX],
 ) -> f64 {
     let m = NX / 2;
-    if (0..m).all(|i| libm::fabs(x[2 * i + 1]) <= REST_SPEED_M_PER_S) {
+    if at_rest(x) {
         return 0.0;
     }
     let u_max = S::U_MAX_T_PER_M;
