@@ -808,7 +808,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             // No plan: the next cycle looks the (braked) state up again,
             // or, once at rest, starts a recovery leg.
             self.restart_plan();
-            if at_rest(x) {
+            // Not while frames disagree with the estimate: it may be wrong.
+            if at_rest(x) && self.gated_rejections == 0 {
                 self.start_recovery_leg(x);
             }
             return out;
