@@ -25,11 +25,12 @@ fn new_buf() -> Box<Buf> {
 }
 
 /// `capsule_mpc_next_actuation` for an actuation starting at `t_s`.
-fn next(h: *mut CapsuleMpc, _t_s: f64, grads: &mut [f64]) -> Result<(u32, i32), i32> {
+fn next(h: *mut CapsuleMpc, t_s: f64, grads: &mut [f64]) -> Result<(u32, i32), i32> {
     let (mut samples, mut status) = (0u32, -1i32);
     let rc = unsafe {
         capsule_mpc_next_actuation(
             h,
+            t_s,
             grads.as_mut_ptr(),
             grads.len(),
             &mut samples,
@@ -54,27 +55,38 @@ fn a_feed_that_does_not_fit_the_sampling_mode_is_an_error() {
     let x = [0.0; 4];
     // Constant sampling (the default): full states are not fed.
     let rc = unsafe { capsule_mpc_feed_state(h, x.as_ptr(), 4) };
-    assert_ne!(rc, CAPSULE_MPC_OK, "feed_state under constant sampling");
+    assert_eq!(
+        rc, CAPSULE_MPC_ERR_WRONG_FEED,
+        "feed_state under constant sampling"
+    );
     assert_eq!(
         unsafe { capsule_mpc_set_sampling(h, CAPSULE_MPC_SAMPLING_VARIABLE) },
         CAPSULE_MPC_OK
     );
     let rc = unsafe { capsule_mpc_feed_state(h, x.as_ptr(), 4) };
-    assert_ne!(rc, CAPSULE_MPC_OK, "feed_state under variable sampling");
+    assert_eq!(
+        rc, CAPSULE_MPC_ERR_WRONG_FEED,
+        "feed_state under variable sampling"
+    );
     // Ideal sampling: tracking frames are not fed.
     assert_eq!(
         unsafe { capsule_mpc_set_sampling(h, CAPSULE_MPC_SAMPLING_IDEAL) },
         CAPSULE_MPC_OK
     );
-    assert_ne!(
+    assert_eq!(
         feed(h, &ORIGIN, 0.0),
-        CAPSULE_MPC_OK,
+        CAPSULE_MPC_ERR_WRONG_FEED,
         "feed_tracking under ideal sampling"
     );
-    assert_ne!(
+    assert_eq!(
         unsafe { capsule_mpc_feed_tracking(h, null(), 0, 0.0, 1) },
-        CAPSULE_MPC_OK,
+        CAPSULE_MPC_ERR_WRONG_FEED,
         "a lost frame under ideal sampling"
+    );
+    // The matching feeds work.
+    assert_eq!(
+        unsafe { capsule_mpc_feed_state(h, x.as_ptr(), 4) },
+        CAPSULE_MPC_OK
     );
 }
 
@@ -91,8 +103,40 @@ fn set_sampling_mid_run_is_refused() {
     }
     assert_eq!(feed(h, &ORIGIN, 0.0), CAPSULE_MPC_OK);
     next(h, 0.02, &mut grads).unwrap();
-    let rc = unsafe { capsule_mpc_set_sampling(h, CAPSULE_MPC_SAMPLING_VARIABLE) };
-    assert_ne!(rc, CAPSULE_MPC_OK, "set_sampling after the loop started");
+    let before = estimate(h);
+    for mode in [CAPSULE_MPC_SAMPLING_VARIABLE, CAPSULE_MPC_SAMPLING_IDEAL] {
+        let rc = unsafe { capsule_mpc_set_sampling(h, mode) };
+        assert_eq!(
+            rc, CAPSULE_MPC_ERR_LOOP_RUNNING,
+            "mode {mode} after the loop started"
+        );
+    }
+    // The mode it has is fine; nothing changed.
+    assert_eq!(
+        unsafe { capsule_mpc_set_sampling(h, CAPSULE_MPC_SAMPLING_CONSTANT) },
+        CAPSULE_MPC_OK
+    );
+    assert_eq!(estimate(h), before);
+    // After a reset the loop starts over: the mode may change again.
+    unsafe {
+        assert_eq!(capsule_mpc_reset(h, ORIGIN.as_ptr(), 2), CAPSULE_MPC_OK);
+        assert_eq!(
+            capsule_mpc_set_sampling(h, CAPSULE_MPC_SAMPLING_VARIABLE),
+            CAPSULE_MPC_OK
+        );
+    }
+    assert_eq!(feed(h, &ORIGIN, 5.0), CAPSULE_MPC_OK);
+    let (samples, _) = next(h, 5.02, &mut grads).unwrap();
+    assert!(samples >= 1);
+}
+
+fn estimate(h: *mut CapsuleMpc) -> [f64; 4] {
+    let mut x = [f64::NAN; 4];
+    assert_eq!(
+        unsafe { capsule_mpc_estimate(h, x.as_mut_ptr(), 4) },
+        CAPSULE_MPC_OK
+    );
+    x
 }
 
 #[test]
@@ -101,31 +145,68 @@ fn target_speeds_must_be_zero() {
     let h = initialized(&mut b);
     for t in [[0.02, 0.01, -0.01, 0.0], [0.02, 0.0, -0.01, -1e-3]] {
         let rc = unsafe { capsule_mpc_set_target(h, t.as_ptr(), 4) };
-        assert_ne!(rc, CAPSULE_MPC_OK, "target {t:?}");
+        assert_eq!(rc, CAPSULE_MPC_ERR_TARGET_NOT_AT_REST, "target {t:?}");
     }
+    // No target was set.
+    let mut status = -1;
+    assert_eq!(
+        unsafe { capsule_mpc_last_status(h, &mut status) },
+        CAPSULE_MPC_OK
+    );
+    assert_eq!(status, CAPSULE_MPC_STATUS_NO_TARGET);
+    assert_eq!(
+        unsafe { capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4) },
+        CAPSULE_MPC_OK
+    );
 }
 
-/// Time stamps that go backwards or jump by 1000 s are refused.
+/// Time stamps that go backwards or jump by 1000 s are refused with
+/// BAD_TIME (the feed: the measurement time; the actuation: its start),
+/// and change nothing: the pending frame stays, the next good call works.
 #[test]
 fn implausible_time_stamps_are_refused() {
     let mut grads = [0.0; 64];
-    for (what, bad_t) in [("backwards", 0.01), ("+1000 s", 1000.0)] {
-        let mut b = new_buf();
-        let h = initialized(&mut b);
-        unsafe {
-            assert_eq!(
-                capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
-                CAPSULE_MPC_OK
-            );
-        }
-        assert_eq!(feed(h, &ORIGIN, 0.0), CAPSULE_MPC_OK);
-        next(h, 0.02, &mut grads).unwrap();
-        assert_eq!(feed(h, &ORIGIN, 0.04), CAPSULE_MPC_OK);
-        next(h, 0.06, &mut grads).unwrap();
-        let rc = feed(h, &ORIGIN, bad_t);
-        let refused = rc != CAPSULE_MPC_OK || next(h, bad_t + 0.02, &mut grads).is_err();
-        assert!(refused, "{what}: measurement time {bad_t} s accepted");
+    let mut b = new_buf();
+    let h = initialized(&mut b);
+    unsafe {
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
     }
+    assert_eq!(feed(h, &ORIGIN, 0.0), CAPSULE_MPC_OK);
+    let (n, _) = next(h, 0.02, &mut grads).unwrap();
+    let end = 0.02 + f64::from(n) * SAMPLE_S;
+    let x = estimate(h);
+    let z = [x[0], x[2]];
+    for (what, bad_t) in [
+        ("backwards", end - 0.01),
+        ("zero again", 0.0),
+        ("+1000 s", end + 1000.0),
+    ] {
+        assert_eq!(feed(h, &z, bad_t), CAPSULE_MPC_ERR_BAD_TIME, "{what}");
+        assert_eq!(
+            unsafe { capsule_mpc_feed_tracking(h, null(), 0, bad_t, 1) },
+            CAPSULE_MPC_ERR_BAD_TIME,
+            "{what}, lost"
+        );
+    }
+    assert_eq!(estimate(h), x);
+    assert_eq!(feed(h, &z, end), CAPSULE_MPC_OK);
+    for (what, bad_t) in [
+        ("before the measurement", end - 0.001),
+        ("+1000 s", end + 1000.0),
+    ] {
+        assert_eq!(
+            next(h, bad_t, &mut grads),
+            Err(CAPSULE_MPC_ERR_BAD_TIME),
+            "{what}"
+        );
+    }
+    assert_eq!(estimate(h), x);
+    // The frame is still pending and the cycle runs on it.
+    let (_, status) = next(h, end + 0.02, &mut grads).unwrap();
+    assert_eq!(status, CAPSULE_MPC_STATUS_OK);
 }
 
 // ---- a host with its own plant ----
@@ -168,7 +249,7 @@ fn host_loop(
     mode: i32,
     end_s: f64,
     tracking_s: impl Fn(usize) -> f64,
-    glitch: impl Fn(f64) -> f64,
+    glitch: impl Fn(f64) -> [f64; 2],
 ) -> (Vec<(f64, [f64; 4])>, Vec<i32>) {
     let mut b = new_buf();
     let h = initialized(&mut b);
@@ -186,7 +267,7 @@ fn host_loop(
     let mut cycle = 0;
     while t < end_s - 1e-9 {
         let off = glitch(t);
-        let z = [s[0] + off, s[2] + off];
+        let z = [s[0] + off[0], s[2] + off[1]];
         let t_meas = t;
         let tr = tracking_s(cycle);
         hold(&mut s, 0.0, tr);
@@ -205,54 +286,69 @@ fn host_loop(
     (trace, statuses)
 }
 
-/// Earliest trace time after which every position stays within 1 mm of C
-/// and every speed below 5 mm/s.
-fn settle_time(trace: &[(f64, [f64; 4])]) -> Option<f64> {
-    let out = |s: &[f64; 4]| {
-        (s[0] - TARGET_C[0]).abs() > 1e-3
-            || (s[2] - TARGET_C[2]).abs() > 1e-3
-            || s[1].abs() >= 5e-3
-            || s[3].abs() >= 5e-3
+/// Earliest trace time T >= `after_s` from which every position stays
+/// within 1 mm of C and every speed below 5 mm/s for at least 1 s (the
+/// settle band; held for 1 s rather than to the end of the run, because
+/// station keeping is not indefinite: README, Known limits).
+fn settled_from(trace: &[(f64, [f64; 4])], after_s: f64) -> Option<f64> {
+    let inside = |s: &[f64; 4]| {
+        (s[0] - TARGET_C[0]).abs() <= 1e-3
+            && (s[2] - TARGET_C[2]).abs() <= 1e-3
+            && s[1].abs() < 5e-3
+            && s[3].abs() < 5e-3
     };
-    match trace.iter().rposition(|(_, s)| out(s)) {
-        None => Some(0.0),
-        Some(i) if i + 1 < trace.len() => Some(trace[i + 1].0),
-        Some(_) => None,
+    let mut start: Option<f64> = None;
+    for (t, s) in trace {
+        if !inside(s) {
+            start = None;
+            continue;
+        }
+        let from = start.get_or_insert(*t).max(after_s);
+        if *t >= from + 1.0 - 1e-9 {
+            return Some(from);
+        }
     }
+    None
 }
 
-/// The report: settled, then 10 frames 5 cm off (constant
-/// sampling): the loop must be settled again within 3 s of the last bad
-/// frame, not braking for good.
+/// The report: settled, then 10 frames 5 cm off; and other
+/// glitches after settling (20 frames 20 cm off, 20 frames +-5 cm, 5 frames
+/// 1 cm on one capsule): the loop is settled again within 3 s of the last
+/// bad frame (and held for 1 s), never braking for good.
 #[test]
 fn a_glitch_after_settling_is_recovered_through_the_c_abi() {
     for mode in [CAPSULE_MPC_SAMPLING_CONSTANT, CAPSULE_MPC_SAMPLING_VARIABLE] {
-        // The first 10 frames measured from 3 s on are 5 cm off.
-        let count = std::cell::Cell::new(0usize);
-        let last_bad_s = std::cell::Cell::new(f64::NAN);
-        let glitch = |t: f64| {
-            if t >= 3.0 - 1e-9 && count.get() < 10 {
-                count.set(count.get() + 1);
-                last_bad_s.set(t);
-                0.05
-            } else {
-                0.0
-            }
-        };
-        let (trace, statuses) = host_loop(mode, 8.0, |_| 0.02, glitch);
-        let settle = settle_time(&trace);
-        let fallbacks = statuses
-            .iter()
-            .rev()
-            .take(25)
-            .filter(|&&s| s == CAPSULE_MPC_STATUS_FALLBACK)
-            .count();
-        let last_bad_s = last_bad_s.get();
-        assert!(
-            settle.is_some_and(|s| s <= last_bad_s + 3.0),
-            "mode {mode}: last bad frame {last_bad_s} s, settled {settle:?}, final {:?}, fallback in {fallbacks} of the last 25 cycles",
-            trace.last().unwrap().1
-        );
+        for (frames, offset) in [
+            (10, [0.05, 0.05]),
+            (20, [0.2, 0.2]),
+            (20, [0.05, -0.05]),
+            (5, [0.01, 0.0]),
+        ] {
+            // The first `frames` frames measured from 3 s on are off.
+            let count = std::cell::Cell::new(0usize);
+            let last_bad_s = std::cell::Cell::new(f64::NAN);
+            let glitch = |t: f64| {
+                if t >= 3.0 - 1e-9 && count.get() < frames {
+                    count.set(count.get() + 1);
+                    last_bad_s.set(t);
+                    offset
+                } else {
+                    [0.0; 2]
+                }
+            };
+            let (trace, statuses) = host_loop(mode, 8.5, |_| 0.02, glitch);
+            let last_bad_s = last_bad_s.get();
+            let settle = settled_from(&trace, last_bad_s);
+            let fallbacks = statuses
+                .iter()
+                .filter(|&&s| s == CAPSULE_MPC_STATUS_FALLBACK)
+                .count();
+            assert!(
+                settle.is_some_and(|s| s <= last_bad_s + 3.0),
+                "mode {mode}, {frames} frames {offset:?} m: last bad frame {last_bad_s} s, settled {settle:?}, final {:?}, {fallbacks} fallback cycles",
+                trace.last().unwrap().1
+            );
+        }
     }
 }
 
@@ -268,8 +364,8 @@ fn longer_and_jittering_tracking_phases_settle_through_the_c_abi() {
                 0.01 + 0.01 * ((k * 7 + 3) % 6) as f64
             }),
         ] {
-            let (trace, _) = host_loop(mode, 6.0, tracking, |_| 0.0);
-            let settle = settle_time(&trace);
+            let (trace, _) = host_loop(mode, 6.0, tracking, |_| [0.0; 2]);
+            let settle = settled_from(&trace, 0.0);
             assert!(
                 settle.is_some_and(|s| s <= 5.0),
                 "mode {mode}, tracking {what}: settled {settle:?}, final {:?}",
