@@ -1143,7 +1143,7 @@ pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     let mut drag = [0.0; K2];
     for i in 0..m {
         (gain[i], drag[i]) = capsule_gain_and_drag::<S, NX, K>(i);
-        if !(gain[i] > 0.0) || !x[2 * i + 1].is_finite() {
+        if gain[i].is_nan() || gain[i] <= 0.0 || !x[2 * i + 1].is_finite() {
             return 0.0;
         }
     }
