@@ -38,9 +38,11 @@ pub struct ControllerSettings {
     /// solve from the measured state and treat the delay as a disturbance
     /// (false, the paper's way).
     pub compensate_delay: bool,
-    /// Tracking phase duration, s.
+    /// Tracking phase duration, s: the fixed timing of
+    /// [`Controller::cycle`], and the gap the plans model until
+    /// [`Controller::cycle_at`] has measured one.
     pub tracking_time_s: f64,
-    /// Extra compute/transfer delay after tracking, s.
+    /// Extra compute/transfer delay after tracking, s (as `tracking_time_s`).
     pub extra_delay_s: f64,
     /// Measurement noise standard deviation, m.
     pub position_noise_m: f64,
@@ -60,9 +62,11 @@ pub struct ControllerSettings {
     pub hold_release_speed_m_per_s: f64,
     /// Re-acquisition: after this many gated-out frames in a row (finite,
     /// within `MAX_ABS_POSITION_M`, but beyond `MEASUREMENT_GATE_NIS` of the
-    /// estimate) with no accepted frame in between, the estimate is taken
-    /// to be wrong (e.g. a `reset` to the wrong place) and is restarted at
-    /// the measured positions. Lost and invalid frames neither count nor
+    /// estimate) that agree with one another, with no accepted frame in
+    /// between, the estimate is taken to be wrong (e.g. a `reset` to the
+    /// wrong place) and is restarted from those frames: positions and
+    /// speeds from a filter run over them (see `glitch_frames` for an
+    /// established estimate). Lost and invalid frames neither count nor
     /// break the run. 0 disables re-acquisition; 1 is refused (every single
     /// outlier would restart the estimate).
     pub reacquire_after_rejections: usize,
@@ -170,7 +174,8 @@ pub const REPLACED_TRACK_MAX_STD_M: f64 = 5.0e-3;
 pub const REPLACED_TRACK_NIS: f64 = 9.0;
 
 /// Normalized innovation squared above which a measurement is rejected
-/// (10 sigma: only gross outliers and wrong data).
+/// (5 sigma: with Gaussian tracking noise about one frame in two million;
+/// glitches of a few mm at rest are caught, see `glitch_frames`).
 pub const MEASUREMENT_GATE_NIS: f64 = 25.0;
 /// Positions farther than this from the origin are not physical, m.
 pub const MAX_ABS_POSITION_M: f64 = 1.0;
@@ -188,21 +193,29 @@ pub const MIN_ACCEL_PSD: f64 = 1.0e-6;
 #[repr(C)]
 pub enum RuntimeStatus {
     Ok = 0,
-    /// The state is outside the tables: a bounded braking input is applied.
+    /// The state is outside the tables: one braking sample (see
+    /// [`braking_gradient`]), never an extrapolated table value. The next
+    /// cycle looks the state up again; at rest outside the tables it starts
+    /// a recovery leg (`Recovering`).
     Fallback = 1,
     /// A QP hit its iteration bound; the best feasible plan was used.
     IterationLimit = 2,
-    /// The measurement was non-finite or implausible and was ignored.
+    /// The measurement was non-finite, beyond `MAX_ABS_POSITION_M`, beyond
+    /// the innovation gate, or part of a glitch (see
+    /// `ControllerSettings::glitch_frames`), and was ignored: the estimate
+    /// was predicted only.
     MeasurementRejected = 3,
     /// No measurement this cycle: the estimate was predicted only.
     MeasurementLost = 4,
     /// No target set: zero gradient.
     NoTarget = 5,
-    /// `reacquire_after_rejections` frames in a row disagreed with the
-    /// estimate: it was restarted at this frame's positions (speeds zero,
-    /// wide uncertainty) and the plan restarted. Reported for that one
-    /// cycle whatever the plan (which may be the fallback or, without a
-    /// target, zero).
+    /// The estimate jumped: `reacquire_after_rejections` gated-out frames
+    /// in a row that agree with one another (`glitch_frames` + 1 against an
+    /// established estimate) replaced it, with the positions and speeds they
+    /// show; or frames returned to the estimate the last re-acquisition
+    /// replaced (a glitch ended) and it was restored. The plan restarted.
+    /// Reported for that one cycle whatever the plan (which may be the
+    /// fallback or, without a target, zero).
     Reacquired = 6,
     /// A QP of this solve took more active-set iterations than the offline
     /// map (`capsule-mpc generate`) measured in the state's index cell: the
