@@ -170,7 +170,8 @@ pub const REPLACED_TRACK_MAX_STD_M: f64 = 5.0e-3;
 
 /// An accepted frame whose normalized innovation squared (summed over the
 /// capsules) exceeds this (3 sigma) keeps the estimate before it as the
-/// replaced track (see `REPLACED_TRACK_MAX_STD_M`).
+/// replaced track (see `REPLACED_TRACK_MAX_STD_M`); a gated-out frame
+/// within it of the replaced track restores that track.
 pub const REPLACED_TRACK_NIS: f64 = 9.0;
 
 /// Normalized innovation squared above which a measurement is rejected
@@ -673,7 +674,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 RuntimeStatus::Ok
             }
             Measurement::GatedOut => {
-                if self.has_replaced && within_gate(&self.replaced[..NX / 2], z, r) {
+                if self.has_replaced && nis(&self.replaced[..NX / 2], z, r) <= REPLACED_TRACK_NIS {
                     // The frames are back on the track the last
                     // re-acquisition replaced: that one was a glitch.
                     self.filters = self.replaced;
