@@ -1,6 +1,6 @@
 //! The runtime's cycle calls never touch the heap: a counting global
 //! allocator counts this thread's allocations while `set_target`,
-//! `cycle_full_state` and `cycle` run along closed-loop trajectories of
+//! `cycle_full_state`, `cycle` and `cycle_at` run along closed-loop trajectories of
 //! scenarios A and C (the trajectories themselves are simulated first, with
 //! the counter off). `capsule-mpc bench` reports `allocations_per_step` from
 //! this test.
@@ -126,6 +126,20 @@ fn controller_cycles_do_not_allocate() {
                 }
             });
             assert_eq!(n, 0, "cycle ({sampling:?}) allocated {n} times");
+            total_calls += positions.len();
+
+            // On the host's clock, tracking phases of 10-60 ms (cycle_at).
+            ctl.reset(&[0.0; spec::M]).unwrap();
+            let (_, n) = counted(|| {
+                let mut t = 0.0;
+                for (k, z) in positions.iter().enumerate() {
+                    let z = if k % 17 == 5 { None } else { Some(&z[..]) };
+                    let t_act = t + 0.01 * (1 + k % 6) as f64;
+                    let out = ctl.cycle_at(z, t, t_act).unwrap();
+                    t = t_act + out.actuation_samples as f64 * spec::DT_S;
+                }
+            });
+            assert_eq!(n, 0, "cycle_at ({sampling:?}) allocated {n} times");
             total_calls += positions.len();
         }
 

@@ -8,10 +8,9 @@
 use capsule_mpc_generator::config::{Config, DisturbanceConfig};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{
-    braking_gradient, ControllerSettings, Sampling, SwitchingRule, MAX_ABS_SPEED_M_PER_S,
-    REACQUIRE_AFTER_REJECTIONS,
+    braking_gradient, ControllerSettings, Sampling, SwitchingRule, BRAKING_HORIZON_S,
+    MAX_ABS_SPEED_M_PER_S, REACQUIRE_AFTER_REJECTIONS,
 };
-use capsule_mpc_runtime::estimator::INITIAL_SPEED_STD_M_PER_S;
 use capsule_mpc_runtime::generated::controller::solver::{self, Schedule, Solver};
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
 use capsule_mpc_runtime::generated::{PlanSolver, SolveStatus};
@@ -205,57 +204,90 @@ fn lost_frames_predict_the_estimate_and_grow_its_covariance() {
 // ---------------------------------------------------------------------------
 // State outside the tables' range.
 
+/// Distance every capsule coasts (u = 0) over `BRAKING_HORIZON_S` from
+/// `x` after one sample at `u`, summed, with the solver's model.
+fn coasting_after(x: &[f64; NX], u: f64) -> f64 {
+    let braked = predicted(x, u, spec::DT_S);
+    let coasted = predicted(&braked, 0.0, BRAKING_HORIZON_S);
+    (0..M).map(|i| (coasted[2 * i] - braked[2 * i]).abs()).sum()
+}
+
 /// Outside the warm-start index with no current plan, the status is
-/// Fallback and the output is the bounded braking law on the mean speed:
-/// one sample, every later sample zero, never a (extrapolated) table plan.
+/// Fallback and the output is one braking sample (every later sample zero),
+/// never a (extrapolated) table plan. The braking law leaves the capsules
+/// the least distance to coast: no more than no braking or braking the
+/// mean speed (which can leave them moving apart, one coasting far). At
+/// rest it is zero, and the next cycle starts a recovery leg (status
+/// Recovering, a stored plan) when the tables reach a point nearer the
+/// target; while moving the next cycle brakes again.
 #[test]
 fn state_outside_the_tables_falls_back_to_braking() {
-    // g_i (m/s^2 per T/m) from the config: the braking law's gain.
     let g_mean = spec::G.iter().sum::<f64>() / M as f64;
-    let cases: [(&str, [f64; NX], Option<f64>); 5] = [
+    let cases: [(&str, [f64; NX], Option<f64>); 6] = [
         // Speeds far outside the index (|v| <= 0.45 m/s), still physical
         // (<= MAX_ABS_SPEED_M_PER_S): saturated braking.
         ("+0.9 m/s", [A[0], 0.9, A[2], 0.9], Some(-U_MAX)),
         ("-1 m/s", [A[0], -1.0, A[2], -1.0], Some(U_MAX)),
-        // One capsule just outside the index, mean speed small: unsaturated.
+        // One capsule just outside the index, moving apart.
         ("0.46 / -0.44 m/s", [A[0], 0.46, A[2], -0.44], None),
+        // The case: 86 and 231 mm/s braked on the mean would leave
+        // -72 and +73 mm/s, the large capsule coasting 12 cm.
+        (
+            "86 / 231 mm/s, 10 cm off",
+            [-0.08, 0.086, -0.07, 0.231],
+            None,
+        ),
         // Positions far outside, at rest: nothing to brake.
         ("30 cm off, at rest", [0.3, 0.0, -0.3, 0.0], Some(0.0)),
         ("90 cm off, moving", [0.9, 0.1, -0.9, 0.2], None),
     ];
     for (what, x, exact) in cases {
         let mut c = controller(Sampling::Ideal, &A);
-        // Twice: the solver is reset after a fallback, so it stays there.
-        for call in 0..2 {
-            let out = c.cycle_full_state(&x).unwrap();
-            let what = format!("{what} (call {call})");
-            assert_eq!(out.status, RuntimeStatus::Fallback, "{what}");
-            assert_safe(&out, &what);
-            assert_eq!(
-                out.solve.map(|r| r.status),
-                Some(SolveStatus::OutOfRange),
-                "{what}"
-            );
-            assert_eq!(out.actuation_samples, 1, "{what}");
-            let u = out.gradients_t_per_m[0];
-            assert_eq!(u, braking_gradient::<Solver, NX, K>(&x), "{what}");
-            if let Some(expected) = exact {
-                assert_eq!(u, expected, "{what}");
-            } else {
-                let mean_v = (x[1] + x[3]) / 2.0;
-                let law = (-mean_v / (g_mean * spec::DT_S)).clamp(-U_MAX, U_MAX);
-                assert!(
-                    (u - law).abs() <= 0.01 * law.abs() + 1e-12,
-                    "{what}: {u} vs {law}"
-                );
-            }
-            assert!(
-                out.gradients_t_per_m[1..].iter().all(|&v| v == 0.0),
-                "{what}: only the braking sample may be non-zero: {:?}",
-                out.gradients_t_per_m
-            );
+        let out = c.cycle_full_state(&x).unwrap();
+        assert_eq!(out.status, RuntimeStatus::Fallback, "{what}");
+        assert_safe(&out, what);
+        assert_eq!(
+            out.solve.map(|r| r.status),
+            Some(SolveStatus::OutOfRange),
+            "{what}"
+        );
+        assert_eq!(out.actuation_samples, 1, "{what}");
+        let u = out.gradients_t_per_m[0];
+        assert_eq!(u, braking_gradient::<Solver, NX, K>(&x), "{what}");
+        if let Some(expected) = exact {
+            assert_eq!(u, expected, "{what}");
+        }
+        assert!(
+            out.gradients_t_per_m[1..].iter().all(|&v| v == 0.0),
+            "{what}: only the braking sample may be non-zero: {:?}",
+            out.gradients_t_per_m
+        );
+        let mean_law = (-(x[1] + x[3]) / 2.0 / (g_mean * spec::DT_S)).clamp(-U_MAX, U_MAX);
+        let (ours, none, mean) = (
+            coasting_after(&x, u),
+            coasting_after(&x, 0.0),
+            coasting_after(&x, mean_law),
+        );
+        assert!(
+            ours <= none + 1e-9 && ours <= mean + 1e-9,
+            "{what}: coasts {ours} m after braking, {none} m without, {mean} m after mean braking"
+        );
+        // The next cycle from the same state.
+        let again = c.cycle_full_state(&x).unwrap();
+        assert_safe(&again, what);
+        if u == 0.0 {
+            assert_eq!(again.status, RuntimeStatus::Recovering, "{what}");
+            assert!(again.solve.is_some_and(|r| r.took_table_plan), "{what}");
+        } else {
+            assert_eq!(again.status, RuntimeStatus::Fallback, "{what}");
         }
     }
+    // Moving apart, braking the mean does next to nothing (and leaves
+    // 14.5 cm to coast); the law stops the large capsule: 12.7 cm.
+    let x = [A[0], 0.46, A[2], -0.44];
+    let mean_law = (-(x[1] + x[3]) / 2.0 / (g_mean * spec::DT_S)).clamp(-U_MAX, U_MAX);
+    let ours = coasting_after(&x, braking_gradient::<Solver, NX, K>(&x));
+    assert!(coasting_after(&x, mean_law) > ours + 0.01, "{ours}");
 
     // The same through the scanner cycle: the estimate restarted far away.
     let mut c = controller(Sampling::Constant, &A);
@@ -268,6 +300,43 @@ fn state_outside_the_tables_falls_back_to_braking() {
         braking_gradient::<Solver, NX, K>(out.estimate[..NX].try_into().unwrap())
     );
     assert!(out.gradients_t_per_m[1..].iter().all(|&v| v == 0.0));
+}
+
+/// At rest outside the tables' range (8-10 cm off, no stored plan reaches
+/// the target from there), the controller does not stay in Fallback: it
+/// moves the capsules along stored plans to intermediate points (status
+/// Recovering, one leg after another) until the tables reach the target,
+/// and then settles there within 5 s (ideal sampling on the solver's
+/// model; 6 s runs).
+#[test]
+fn recovery_legs_bring_a_state_at_rest_outside_the_tables_back() {
+    for start in [[0.10, 0.0, 0.11, 0.0], [-0.06, 0.0, 0.08, 0.0]] {
+        let mut c = controller(Sampling::Ideal, &A);
+        let mut x = start;
+        let mut statuses = Vec::new();
+        for _ in 0..300 {
+            let out = c.cycle_full_state(&x).unwrap();
+            assert_safe(&out, "recovery");
+            statuses.push(out.status);
+            x = predicted(&x, out.gradients_t_per_m[0], spec::DT_S);
+        }
+        let what = format!("from {start:?}: final {x:?}");
+        assert_eq!(statuses[0], RuntimeStatus::Fallback, "{what}");
+        let legs = statuses
+            .iter()
+            .filter(|s| **s == RuntimeStatus::Recovering)
+            .count();
+        assert!(legs > 0, "{what}");
+        let last_non_ok = statuses
+            .iter()
+            .rposition(|s| *s != RuntimeStatus::Ok)
+            .unwrap();
+        assert!(last_non_ok < 250, "{what}: {statuses:?}");
+        for i in 0..M {
+            assert!((x[2 * i] - A[2 * i]).abs() <= 1e-3, "{what}");
+            assert!(x[2 * i + 1].abs() <= 5e-3, "{what}");
+        }
+    }
 }
 
 /// A full state beyond the physical range (|x| > 1 m or |v| > 1 m/s) is

@@ -11,7 +11,7 @@ use capsule_mpc_generator::config::{Config, ConfigError, DEFAULT_CONFIG_TOML};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{
     braking_gradient, ControllerSettings, Sampling, SwitchingRule, MAX_ABS_POSITION_M,
-    MAX_ABS_SPEED_M_PER_S, SETTING_NAMES,
+    MAX_ABS_SPEED_M_PER_S, MAX_CYCLE_GAP_S, SETTING_NAMES, TIME_TOLERANCE_S,
 };
 use capsule_mpc_runtime::generated::controller::solver::Solver;
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
@@ -146,7 +146,7 @@ fn run_loop(case: &LoopCase) -> Result<Option<()>, TestCaseError> {
         Ok(()) => {}
         Err(RuntimeError::TargetOutOfRange)
         | Err(RuntimeError::OutsideWorkspace { .. })
-        | Err(RuntimeError::TargetSpeedNotZero { .. }) => return Ok(None),
+        | Err(RuntimeError::TargetNotAtRest) => return Ok(None),
         Err(e) => return Err(TestCaseError::fail(format!("set_target: {e:?}"))),
     }
     for cycle in 1..=case.cycles {
@@ -203,8 +203,8 @@ proptest! {
 
     /// Random full states in and far outside the tables (relative
     /// positions up to 30 cm, speeds up to 3 m/s) from a fresh plan: Ok,
-    /// IterationLimit or Fallback, and a Fallback output is the braking law
-    /// alone (never a table value); a state beyond the physical range is
+    /// IterationLimit, Fallback or (after a Fallback at rest) Recovering,
+    /// and a Fallback output is the braking law alone (never a table value); a state beyond the physical range is
     /// rejected with the estimate kept. Then a few more cycles from the
     /// plan's predicted states.
     #[test]
@@ -234,7 +234,8 @@ proptest! {
             match out.status {
                 RuntimeStatus::Ok
                 | RuntimeStatus::IterationLimit
-                | RuntimeStatus::AboveIterationMap => {}
+                | RuntimeStatus::AboveIterationMap
+                | RuntimeStatus::Recovering => {}
                 RuntimeStatus::Fallback => {
                     prop_assert_eq!(
                         out.gradients_t_per_m[0],
@@ -276,6 +277,9 @@ enum Op {
     FullState([f64; NX]),
     SetTarget([f64; NX]),
     Reset([f64; M]),
+    /// `cycle_at`: a frame (or lost), and the measurement time and the
+    /// actuation start relative to the last actuation end (wild).
+    Timed(Option<[f64; M]>, f64, f64),
 }
 
 fn op() -> impl Strategy<Value = Op> {
@@ -285,6 +289,12 @@ fn op() -> impl Strategy<Value = Op> {
         2 => [wild_f64(0.06), wild_f64(0.5), wild_f64(0.06), wild_f64(0.5)].prop_map(Op::FullState),
         1 => [wild_f64(0.05), wild_f64(0.01), wild_f64(0.05), wild_f64(0.01)].prop_map(Op::SetTarget),
         1 => [wild_f64(0.06), wild_f64(0.06)].prop_map(Op::Reset),
+        3 => (
+            proptest::option::of([wild_f64(0.06), wild_f64(0.06)]),
+            wild_f64(0.05),
+            wild_f64(0.1),
+        )
+            .prop_map(|(z, dm, da)| Op::Timed(z, dm, da)),
     ]
 }
 
@@ -393,10 +403,43 @@ proptest! {
                     Ok(()) => prop_assert_eq!(ctl.target(), Some(t)),
                     Err(RuntimeError::NonFinite(name)) => prop_assert_eq!(name, "target"),
                     Err(RuntimeError::TargetOutOfRange)
-                    | Err(RuntimeError::OutsideWorkspace { .. })
-                    | Err(RuntimeError::TargetSpeedNotZero { .. }) => {}
+                    | Err(RuntimeError::OutsideWorkspace { .. }) => {}
+                    Err(RuntimeError::TargetNotAtRest) => {
+                        prop_assert!((0..M).any(|i| t[2 * i + 1] != 0.0));
+                    }
                     Err(e) => return Err(TestCaseError::fail(format!("set_target: {e:?}"))),
                 },
+                Op::Timed(z, dm, da) => {
+                    let (dm, da) = (*dm, *da);
+                    let end = ctl.actuation_end_s().unwrap_or(0.0);
+                    let (t_meas, t_act) = (end + dm, end + dm + da);
+                    match ctl.cycle_at(z.as_ref().map(|z| &z[..]), t_meas, t_act) {
+                        Ok(out) => {
+                            check_output(&out, &s)?;
+                            prop_assert!(t_meas.is_finite() && t_act >= t_meas);
+                        }
+                        Err(RuntimeError::NonFinite(name)) | Err(RuntimeError::BadTime(name)) => {
+                            prop_assert!(
+                                ["t_measured_s", "t_actuation_start_s"].contains(&name),
+                                "{}",
+                                name
+                            );
+                            prop_assert!(
+                                !t_meas.is_finite()
+                                    || !t_act.is_finite()
+                                    || t_act < t_meas
+                                    || dm < -TIME_TOLERANCE_S
+                                    || dm + da > MAX_CYCLE_GAP_S
+                                    || t_act - t_meas > MAX_CYCLE_GAP_S,
+                                "{} refused at {} / {}",
+                                name,
+                                dm,
+                                da
+                            );
+                        }
+                        Err(e) => return Err(TestCaseError::fail(format!("cycle_at: {e:?}"))),
+                    }
+                }
                 Op::Reset(p) => match ctl.reset(p) {
                     Ok(()) => prop_assert_eq!(ctl.estimate()[0], p[0]),
                     Err(e) => prop_assert_eq!(e, RuntimeError::NonFinite("positions_m")),

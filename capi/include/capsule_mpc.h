@@ -11,7 +11,8 @@
  *
  * Every function returns CAPSULE_MPC_OK (0) or a negative error code, except
  * the three constant queries. On error nothing changes and no output is
- * written. Units: SI (m, m/s, s, T/m).
+ * written. Units: SI (m, m/s, s, T/m). Times are the host's scanner clock in
+ * seconds (any origin; it restarts at init and reset).
  *
  * Call order:
  *   capsule_mpc_dimensions / capsule_mpc_abi_version   (check the build)
@@ -19,10 +20,20 @@
  *   capsule_mpc_set_sampling(h, mode)                  (optional, before the loop)
  *   capsule_mpc_set_target(h, target, 2M)
  *   loop: tracking phase (u = 0), then
- *         capsule_mpc_feed_tracking(h, positions, M, t, lost)
- *           (or capsule_mpc_feed_state for ideal sampling)
- *         capsule_mpc_next_actuation(h, grads, cap, &samples, &status)
- *         play grads[0..samples), one per sample time
+ *         capsule_mpc_feed_tracking(h, positions, M, t_measured, lost)
+ *           (ideal sampling: capsule_mpc_feed_state instead)
+ *         capsule_mpc_next_actuation(h, t_actuation_start, grads, cap, &samples, &status)
+ *         play grads[0..samples), one per sample time, from t_actuation_start
+ *
+ * Timing: the controller predicts its estimate from the end of the last
+ * actuation phase (its start + samples x sample time) through the
+ * measurement to the actuation start you give, and plans for the gaps these
+ * times show. Tracking phases may have any length and vary from cycle to
+ * cycle; report the true times. A measurement more than 1 ms before the end
+ * of the last actuation phase (time going backwards) or more than 1 s after
+ * it, or an actuation start before its measurement or more than 1 s after
+ * the last actuation ended, is refused with CAPSULE_MPC_ERR_BAD_TIME. After
+ * a longer pause, call capsule_mpc_reset.
  */
 #ifndef CAPSULE_MPC_H
 #define CAPSULE_MPC_H
@@ -34,7 +45,7 @@
 extern "C" {
 #endif
 
-#define CAPSULE_MPC_ABI_VERSION 2u
+#define CAPSULE_MPC_ABI_VERSION 3u
 
 /* Error codes. */
 #define CAPSULE_MPC_OK 0
@@ -44,9 +55,13 @@ extern "C" {
 #define CAPSULE_MPC_ERR_WRONG_LENGTH (-4)
 #define CAPSULE_MPC_ERR_NON_FINITE (-5)
 #define CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE (-6)
-#define CAPSULE_MPC_ERR_BAD_MODE (-7)
+#define CAPSULE_MPC_ERR_BAD_MODE (-7)        /* not a CAPSULE_MPC_SAMPLING_* value */
 #define CAPSULE_MPC_ERR_NOT_INITIALIZED (-8)
 #define CAPSULE_MPC_ERR_BAD_SETTING (-9)
+#define CAPSULE_MPC_ERR_BAD_TIME (-10)       /* time going backwards or jumping (see Timing) */
+#define CAPSULE_MPC_ERR_WRONG_FEED (-11)     /* feed_state outside ideal sampling, feed_tracking in it */
+#define CAPSULE_MPC_ERR_LOOP_RUNNING (-12)   /* set_sampling after the loop started: reset first */
+#define CAPSULE_MPC_ERR_TARGET_NOT_AT_REST (-13) /* a target speed is not 0 */
 
 /* Sampling modes (capsule_mpc_set_sampling). */
 #define CAPSULE_MPC_SAMPLING_IDEAL 0
@@ -54,22 +69,52 @@ extern "C" {
 #define CAPSULE_MPC_SAMPLING_VARIABLE 2
 
 /* Cycle status (capsule_mpc_next_actuation, capsule_mpc_last_status).
- * The plan is usable and within |u| <= u_max whatever the status. */
+ * Whatever the status, the plan is finite and within |u| <= u_max: play it.
+ * What each means for the host:
+ *   OK                  nominal.
+ *   FALLBACK            the state is outside the tables: one braking sample
+ *                       that leaves the capsules the least distance to coast.
+ *                       Keep the loop running: the controller plans again as
+ *                       soon as the state is back in range, or, at rest,
+ *                       starts RECOVERING. Persistent FALLBACK at rest means
+ *                       no stored plan gets the capsules nearer the target:
+ *                       set a nearer target.
+ *   ITERATION_LIMIT     a QP hit its bound; the best feasible plan. Log it.
+ *   MEASUREMENT_REJECTED the frame was implausible (non-finite, |x| > 1 m,
+ *                       beyond the 5-sigma gate, or part of a glitch: up to
+ *                       20 frames that contradict an established estimate);
+ *                       the estimate was predicted only. Check tracking if
+ *                       it persists.
+ *   MEASUREMENT_LOST    no frame (lost or none fed): predicted only.
+ *   NO_TARGET           zero gradient: set a target.
+ *   REACQUIRED          the estimate jumped to the frames (after a wrong reset,
+ *                       5 agreeing frames; against an established estimate,
+ *                       21) with the positions and speeds they show, or back
+ *                       to the estimate they had replaced when frames return
+ *                       to it (a glitch ended). The plan restarted. Log it.
+ *   ABOVE_ITERATION_MAP a QP took more iterations than measured offline for
+ *                       this state; the plan is converged. Log it.
+ *   RECOVERING          after a FALLBACK at rest outside the tables, the
+ *                       controller moves the capsules along stored plans to
+ *                       intermediate points until the tables reach the target.
+ *                       Keep the loop running. */
 #define CAPSULE_MPC_STATUS_OK 0
-#define CAPSULE_MPC_STATUS_FALLBACK 1             /* outside the tables: braking */
-#define CAPSULE_MPC_STATUS_ITERATION_LIMIT 2      /* best feasible plan used */
-#define CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED 3 /* frame implausible, ignored */
-#define CAPSULE_MPC_STATUS_MEASUREMENT_LOST 4     /* no frame: predicted only */
-#define CAPSULE_MPC_STATUS_NO_TARGET 5            /* zero gradient */
-#define CAPSULE_MPC_STATUS_REACQUIRED 6           /* estimate was wrong: restarted at this frame */
-#define CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP 7  /* QP took more iterations than measured offline here */
+#define CAPSULE_MPC_STATUS_FALLBACK 1
+#define CAPSULE_MPC_STATUS_ITERATION_LIMIT 2
+#define CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED 3
+#define CAPSULE_MPC_STATUS_MEASUREMENT_LOST 4
+#define CAPSULE_MPC_STATUS_NO_TARGET 5
+#define CAPSULE_MPC_STATUS_REACQUIRED 6
+#define CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP 7
+#define CAPSULE_MPC_STATUS_RECOVERING 8
 
 /* Opaque controller; a handle is the buffer given to capsule_mpc_init. */
 typedef struct capsule_mpc capsule_mpc_t;
 
 uint32_t capsule_mpc_abi_version(void);
 
-/* Bytes and alignment of the buffer capsule_mpc_init needs. */
+/* Bytes and alignment of the buffer capsule_mpc_init needs (they depend on
+ * the generated config: always ask). */
 size_t capsule_mpc_workspace_size(void);
 size_t capsule_mpc_workspace_align(void);
 
@@ -82,35 +127,49 @@ int32_t capsule_mpc_dimensions(uint32_t *capsules, uint32_t *horizon, uint32_t *
  * positions_m[0..n_positions), n_positions = M; constant sampling; no target. */
 int32_t capsule_mpc_init(void *buffer, size_t size, const double *positions_m, size_t n_positions);
 
-/* Restarts the estimate at rest at positions_m (n = M); keeps the target. */
+/* Restarts the estimate at rest at positions_m (n = M); keeps the target and
+ * the mode; drops a fed frame; restarts the clock; allows set_sampling. */
 int32_t capsule_mpc_reset(capsule_mpc_t *handle, const double *positions_m, size_t n);
 
-/* Target [x1, v1, x2, v2, ...] (n = 2M, speeds 0). */
+/* Target [x1, v1, x2, v2, ...] (n = 2M). Speeds must be 0
+ * (CAPSULE_MPC_ERR_TARGET_NOT_AT_REST); TARGET_OUT_OF_RANGE when no stored
+ * plan reaches it from the current estimate. */
 int32_t capsule_mpc_set_target(capsule_mpc_t *handle, const double *target, size_t n);
 
 /* CAPSULE_MPC_SAMPLING_*; restarts the estimate at rest at the current
- * estimated positions (keeps the target): call before the loop. */
+ * estimated positions (keeps the target). Only before the loop: after init
+ * or reset and before the next capsule_mpc_next_actuation, otherwise
+ * CAPSULE_MPC_ERR_LOOP_RUNNING (setting the current mode is always OK). */
 int32_t capsule_mpc_set_sampling(capsule_mpc_t *handle, int32_t mode);
 
-/* One tracking frame: positions (n = M) measured at the start of the tracking
- * phase that just ended, at time t_measured_s (finite). lost != 0: no frame
- * (positions_m may be NULL). */
+/* One tracking frame (constant or variable sampling; WRONG_FEED under ideal):
+ * positions (n = M) measured at the start of the tracking phase that just
+ * ended, at time t_measured_s (finite; BAD_TIME, see Timing). lost != 0: no
+ * frame (positions_m may be NULL). A later feed replaces an earlier one. */
 int32_t capsule_mpc_feed_tracking(capsule_mpc_t *handle, const double *positions_m, size_t n,
                                   double t_measured_s, int32_t lost);
 
-/* Full state [x1, v1, x2, v2, ...] (n = 2M), for ideal sampling. */
+/* Full state [x1, v1, x2, v2, ...] (n = 2M), ideal sampling only (WRONG_FEED
+ * otherwise). */
 int32_t capsule_mpc_feed_state(capsule_mpc_t *handle, const double *state, size_t n);
 
-/* Runs one cycle on the fed frame (none fed = lost) and writes
- * gradients_t_per_m[0..min(capacity, plan_len)); play the first *samples,
- * one per sample time, from the actuation start. capacity >= horizon. */
-int32_t capsule_mpc_next_actuation(capsule_mpc_t *handle, double *gradients_t_per_m, size_t capacity,
-                                   uint32_t *samples, int32_t *status);
+/* Runs one cycle on the fed frame (none fed = lost) for an actuation that
+ * starts at t_actuation_start_s (finite; BAD_TIME, see Timing; unused under
+ * ideal sampling) and writes gradients_t_per_m[0..min(capacity, plan_len));
+ * play the first *samples, one per sample time, from the actuation start.
+ * capacity >= horizon. */
+int32_t capsule_mpc_next_actuation(capsule_mpc_t *handle, double t_actuation_start_s,
+                                   double *gradients_t_per_m, size_t capacity, uint32_t *samples,
+                                   int32_t *status);
 
 /* Status of the last cycle (CAPSULE_MPC_STATUS_NO_TARGET before any). */
 int32_t capsule_mpc_last_status(capsule_mpc_t *handle, int32_t *status);
 
-/* State estimate [x1, v1, x2, v2, ...] (capacity >= 2M). */
+/* State estimate [x1, v1, x2, v2, ...] (capacity >= 2M) at the end of the
+ * last actuation phase returned (its start + *samples x sample time): the
+ * predicted state at the next measurement when tracking starts right after
+ * the actuation. After init or reset: the rest state given there. Ideal
+ * sampling: the state last fed. */
 int32_t capsule_mpc_estimate(capsule_mpc_t *handle, double *state, size_t capacity);
 
 #ifdef __cplusplus

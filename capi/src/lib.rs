@@ -26,7 +26,7 @@ use core::mem::{align_of, size_of};
 use core::ptr;
 
 /// ABI version: bumped on any change of a signature, struct or constant.
-pub const CAPSULE_MPC_ABI_VERSION: u32 = 2;
+pub const CAPSULE_MPC_ABI_VERSION: u32 = 3;
 
 pub const CAPSULE_MPC_OK: i32 = 0;
 pub const CAPSULE_MPC_ERR_NULL_POINTER: i32 = -1;
@@ -38,6 +38,10 @@ pub const CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE: i32 = -6;
 pub const CAPSULE_MPC_ERR_BAD_MODE: i32 = -7;
 pub const CAPSULE_MPC_ERR_NOT_INITIALIZED: i32 = -8;
 pub const CAPSULE_MPC_ERR_BAD_SETTING: i32 = -9;
+pub const CAPSULE_MPC_ERR_BAD_TIME: i32 = -10;
+pub const CAPSULE_MPC_ERR_WRONG_FEED: i32 = -11;
+pub const CAPSULE_MPC_ERR_LOOP_RUNNING: i32 = -12;
+pub const CAPSULE_MPC_ERR_TARGET_NOT_AT_REST: i32 = -13;
 
 pub const CAPSULE_MPC_SAMPLING_IDEAL: i32 = 0;
 pub const CAPSULE_MPC_SAMPLING_CONSTANT: i32 = 1;
@@ -51,6 +55,7 @@ pub const CAPSULE_MPC_STATUS_MEASUREMENT_LOST: i32 = RuntimeStatus::MeasurementL
 pub const CAPSULE_MPC_STATUS_NO_TARGET: i32 = RuntimeStatus::NoTarget as i32;
 pub const CAPSULE_MPC_STATUS_REACQUIRED: i32 = RuntimeStatus::Reacquired as i32;
 pub const CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP: i32 = RuntimeStatus::AboveIterationMap as i32;
+pub const CAPSULE_MPC_STATUS_RECOVERING: i32 = RuntimeStatus::Recovering as i32;
 
 const M: usize = <Solver as PlanSolver<NX, K>>::M;
 const NX: usize = capsule_mpc_runtime::generated::controller::spec::NX;
@@ -65,10 +70,11 @@ const MAGIC: u64 = 0x4341_5053_4d50_4331;
 enum Pending {
     /// Nothing fed (treated as a lost frame).
     Nothing,
-    /// The tracking frame was lost.
-    Lost,
-    /// Positions measured at the start of the tracking phase, m.
-    Positions([f64; M]),
+    /// The tracking frame measured at this time, s, was lost.
+    Lost(f64),
+    /// Positions measured at the start of the tracking phase, m, and the
+    /// time they were measured, s.
+    Positions([f64; M], f64),
     /// Full state (ideal sampling), SI.
     FullState([f64; NX]),
 }
@@ -80,8 +86,9 @@ pub struct CapsuleMpc {
     magic: u64,
     pending: Pending,
     last_status: RuntimeStatus,
-    /// Time stamp of the last fed frame, s (bookkeeping; must be finite).
-    last_measured_t_s: f64,
+    /// A cycle ran since init or the last reset (the sampling mode is then
+    /// fixed until the next reset).
+    running: bool,
     controller: DefaultController,
 }
 
@@ -98,12 +105,13 @@ fn map_err(e: RuntimeError) -> i32 {
     match e {
         RuntimeError::NonFinite(_) => CAPSULE_MPC_ERR_NON_FINITE,
         RuntimeError::WrongLength(_) => CAPSULE_MPC_ERR_WRONG_LENGTH,
-        // Outside the workspace, or moving (targets are rest states): not
-        // a target the controller can hold.
-        RuntimeError::TargetOutOfRange
-        | RuntimeError::OutsideWorkspace { .. }
-        | RuntimeError::TargetSpeedNotZero { .. } => CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE,
+        // Outside the workspace: not a target the controller can reach.
+        RuntimeError::TargetOutOfRange | RuntimeError::OutsideWorkspace { .. } => {
+            CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE
+        }
         RuntimeError::BadSetting(_) => CAPSULE_MPC_ERR_BAD_SETTING,
+        RuntimeError::BadTime(_) => CAPSULE_MPC_ERR_BAD_TIME,
+        RuntimeError::TargetNotAtRest => CAPSULE_MPC_ERR_TARGET_NOT_AT_REST,
     }
 }
 
@@ -248,7 +256,7 @@ pub unsafe extern "C" fn capsule_mpc_init(
             magic: MAGIC,
             pending: Pending::Nothing,
             last_status: RuntimeStatus::NoTarget,
-            last_measured_t_s: 0.0,
+            running: false,
             controller,
         };
         // SAFETY: h is non-null, aligned, and the buffer holds size >=
@@ -261,7 +269,8 @@ pub unsafe extern "C" fn capsule_mpc_init(
 }
 
 /// Restarts the estimate at rest at `positions_m`, keeping the target and
-/// the sampling mode; drops any fed frame.
+/// the sampling mode; drops any fed frame and the time base (the next
+/// frame may carry any time), and allows `capsule_mpc_set_sampling` again.
 ///
 /// # Safety
 /// `handle` must come from `capsule_mpc_init` (or be a zeroed buffer);
@@ -278,13 +287,15 @@ pub unsafe extern "C" fn capsule_mpc_reset(
         let p: [f64; M] = unsafe { read_array(positions_m, n) }?;
         ws.controller.reset(&p).map_err(map_err)?;
         ws.pending = Pending::Nothing;
+        ws.running = false;
         Ok(())
     })();
     code(r)
 }
 
-/// Sets the target state `[x1, v1, x2, v2, ...]` (`n` = 2 x capsules; SI,
-/// speeds 0). Refused with TARGET_OUT_OF_RANGE when the stored plans do not
+/// Sets the target state `[x1, v1, x2, v2, ...]` (`n` = 2 x capsules; SI).
+/// The speeds must be 0 (TARGET_NOT_AT_REST otherwise: the plans end at
+/// rest). Refused with TARGET_OUT_OF_RANGE when the stored plans do not
 /// cover it from the current estimate.
 ///
 /// # Safety
@@ -308,7 +319,10 @@ pub unsafe extern "C" fn capsule_mpc_set_target(
 /// `capsule_mpc_feed_state`), 1 constant (one actuation sample per tracking
 /// phase, the default), 2 variable (the switching rule decides). Changing
 /// the mode restarts the estimate at rest at the current estimated positions
-/// (keeping the target): call it before the loop.
+/// (keeping the target), so it is only allowed before the loop: after
+/// `capsule_mpc_init` or `capsule_mpc_reset` and before the next
+/// `capsule_mpc_next_actuation`; afterwards LOOP_RUNNING (setting the mode
+/// it already has is always OK).
 ///
 /// # Safety
 /// `handle` as for `capsule_mpc_reset`.
@@ -325,6 +339,9 @@ pub unsafe extern "C" fn capsule_mpc_set_sampling(handle: *mut CapsuleMpc, mode:
         };
         if ws.controller.settings().sampling == sampling {
             return Ok(());
+        }
+        if ws.running {
+            return Err(CAPSULE_MPC_ERR_LOOP_RUNNING);
         }
         // The runtime fixes settings at construction: rebuild, then commit.
         let mut settings = *ws.controller.settings();
@@ -345,10 +362,14 @@ pub unsafe extern "C" fn capsule_mpc_set_sampling(handle: *mut CapsuleMpc, mode:
     code(r)
 }
 
-/// Feeds one tracking frame: `positions_m` (`n` = capsules) measured at the
+/// Feeds one tracking frame (constant or variable sampling; WRONG_FEED
+/// under ideal sampling): `positions_m` (`n` = capsules) measured at the
 /// start of the tracking phase that just ended, at scanner time
 /// `t_measured_s`. With `lost != 0` the frame is lost: `positions_m` may be
 /// NULL and `n` is ignored. A later feed replaces an earlier one.
+/// `t_measured_s` is refused with BAD_TIME when it lies before the end of
+/// the last actuation phase returned (by more than 1 ms: time going
+/// backwards) or more than 1 s after it.
 ///
 /// # Safety
 /// `handle` as for `capsule_mpc_reset`; `positions_m` must point to `n`
@@ -364,23 +385,26 @@ pub unsafe extern "C" fn capsule_mpc_feed_tracking(
     let r = (|| {
         // SAFETY: see the function's contract; the helpers check pointers.
         let ws = unsafe { workspace(handle) }?;
-        if !t_measured_s.is_finite() {
-            return Err(CAPSULE_MPC_ERR_NON_FINITE);
+        if ws.controller.settings().sampling == Sampling::Ideal {
+            return Err(CAPSULE_MPC_ERR_WRONG_FEED);
         }
+        ws.controller
+            .check_measurement_time(t_measured_s)
+            .map_err(map_err)?;
         let pending = if lost != 0 {
-            Pending::Lost
+            Pending::Lost(t_measured_s)
         } else {
-            Pending::Positions(unsafe { read_array(positions_m, n) }?)
+            Pending::Positions(unsafe { read_array(positions_m, n) }?, t_measured_s)
         };
         ws.pending = pending;
-        ws.last_measured_t_s = t_measured_s;
         Ok(())
     })();
     code(r)
 }
 
 /// Feeds the full state `[x1, v1, x2, v2, ...]` (`n` = 2 x capsules), for
-/// ideal sampling: the next actuation is planned from it directly.
+/// ideal sampling only (WRONG_FEED otherwise): the next actuation is
+/// planned from it directly.
 ///
 /// # Safety
 /// `handle` as for `capsule_mpc_reset`; `state` must point to `n` doubles.
@@ -393,6 +417,9 @@ pub unsafe extern "C" fn capsule_mpc_feed_state(
     let r = (|| {
         // SAFETY: see the function's contract; the helpers check pointers.
         let ws = unsafe { workspace(handle) }?;
+        if ws.controller.settings().sampling != Sampling::Ideal {
+            return Err(CAPSULE_MPC_ERR_WRONG_FEED);
+        }
         ws.pending = Pending::FullState(unsafe { read_array(state, n) }?);
         Ok(())
     })();
@@ -400,10 +427,21 @@ pub unsafe extern "C" fn capsule_mpc_feed_state(
 }
 
 /// Runs one controller cycle on the fed frame (nothing fed counts as a lost
-/// frame) and writes the plan: `gradients_t_per_m[0..min(capacity, plan_len)]`
-/// in T/m, of which the first `*samples` are to be played (20 ms each) from
-/// the actuation start; `*status` is a `CAPSULE_MPC_STATUS_*` value.
+/// frame) for an actuation that starts at scanner time
+/// `t_actuation_start_s`, and writes the plan:
+/// `gradients_t_per_m[0..min(capacity, plan_len)]` in T/m, of which the
+/// first `*samples` are to be played (one per sample time, 20 ms) from the
+/// actuation start; `*status` is a `CAPSULE_MPC_STATUS_*` value.
 /// `capacity` must be at least the horizon (the largest `*samples`).
+///
+/// Constant and variable sampling predict the estimate from the end of the
+/// previous actuation phase through the measurement to
+/// `t_actuation_start_s` and plan for the gaps these times show, so any
+/// tracking length works. BAD_TIME when `t_actuation_start_s` is before
+/// the frame's measurement time or more than 1 s after the end of the
+/// previous actuation phase (the first cycle after init or reset: after
+/// the measurement). Under ideal sampling the time must be finite and is
+/// otherwise unused.
 ///
 /// # Safety
 /// `handle` as for `capsule_mpc_reset`; `gradients_t_per_m` must be valid
@@ -411,6 +449,7 @@ pub unsafe extern "C" fn capsule_mpc_feed_state(
 #[no_mangle]
 pub unsafe extern "C" fn capsule_mpc_next_actuation(
     handle: *mut CapsuleMpc,
+    t_actuation_start_s: f64,
     gradients_t_per_m: *mut f64,
     capacity: usize,
     samples: *mut u32,
@@ -425,14 +464,23 @@ pub unsafe extern "C" fn capsule_mpc_next_actuation(
         if capacity < N {
             return Err(CAPSULE_MPC_ERR_WRONG_LENGTH);
         }
+        if !t_actuation_start_s.is_finite() {
+            return Err(CAPSULE_MPC_ERR_NON_FINITE);
+        }
+        let t = t_actuation_start_s;
+        let ideal = ws.controller.settings().sampling == Sampling::Ideal;
         let out = match ws.pending {
-            Pending::Nothing | Pending::Lost => ws.controller.cycle(None),
-            Pending::Positions(z) => ws.controller.cycle(Some(&z)),
+            // Ideal sampling without a fed state: a lost frame.
+            Pending::Nothing if ideal => ws.controller.cycle(None),
+            Pending::Nothing => ws.controller.cycle_at(None, t, t),
+            Pending::Lost(t_meas) => ws.controller.cycle_at(None, t_meas, t),
+            Pending::Positions(z, t_meas) => ws.controller.cycle_at(Some(&z), t_meas, t),
             Pending::FullState(x) => ws.controller.cycle_full_state(&x),
         }
         .map_err(map_err)?;
         ws.pending = Pending::Nothing;
         ws.last_status = out.status;
+        ws.running = true;
         let len = capacity.min(K);
         // SAFETY: the pointers were checked above; the caller guarantees
         // `capacity` doubles at gradients_t_per_m and len <= capacity.
@@ -465,7 +513,12 @@ pub unsafe extern "C" fn capsule_mpc_last_status(handle: *mut CapsuleMpc, status
 }
 
 /// Current state estimate `[x1, v1, x2, v2, ...]` (SI) into `state`
-/// (`capacity` >= 2 x capsules).
+/// (`capacity` >= 2 x capsules). It describes the instant the last
+/// actuation phase returned by `capsule_mpc_next_actuation` ends (its start
+/// plus `*samples` sample times): the predicted state at the next
+/// measurement when tracking starts right after the actuation. After
+/// `capsule_mpc_init` or `capsule_mpc_reset`: the rest state given there.
+/// Under ideal sampling: the state last fed (the plan's start).
 ///
 /// # Safety
 /// `handle` as for `capsule_mpc_reset`; `state` valid for `capacity` writes.

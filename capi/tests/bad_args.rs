@@ -22,6 +22,8 @@ fn misaligned_f64(bytes: &mut [u64; 8]) -> *mut f64 {
 }
 
 const ORIGIN: [f64; 2] = [0.0, 0.0];
+/// Actuation start of the single cycles below, s (measurement at 0).
+const T_ACT: f64 = 0.02;
 const TARGET_C: [f64; 4] = [0.02, 0.0, -0.01, 0.0];
 
 fn initialized() -> Box<Buf> {
@@ -199,6 +201,7 @@ fn every_handle_fn_returns(h: *mut CapsuleMpc, expected: i32) {
         assert_eq!(
             capsule_mpc_next_actuation(
                 h,
+                T_ACT,
                 grads.as_mut_ptr(),
                 grads.len(),
                 &mut samples,
@@ -325,6 +328,7 @@ fn set_target_bad_args() {
         unsafe {
             capsule_mpc_next_actuation(
                 h,
+                T_ACT,
                 grads.as_mut_ptr(),
                 grads.len(),
                 &mut samples,
@@ -411,26 +415,52 @@ fn feed_bad_args() {
             capsule_mpc_feed_tracking(h, null(), 0, 0.0, 1),
             CAPSULE_MPC_OK
         );
-        // Full state.
+        // Constant sampling: a full state does not fit the mode.
         assert_eq!(
-            capsule_mpc_feed_state(h, null(), 4),
+            capsule_mpc_feed_state(h, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_ERR_WRONG_FEED
+        );
+    }
+    // Full states, under ideal sampling (another handle).
+    let mut ideal = initialized();
+    let hi = handle(&mut ideal);
+    unsafe {
+        assert_eq!(
+            capsule_mpc_set_sampling(hi, CAPSULE_MPC_SAMPLING_IDEAL),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_feed_state(hi, null(), 4),
             CAPSULE_MPC_ERR_NULL_POINTER
         );
         assert_eq!(
-            capsule_mpc_feed_state(h, misaligned_f64(&mut words), 4),
+            capsule_mpc_feed_state(hi, misaligned_f64(&mut words), 4),
             CAPSULE_MPC_ERR_BAD_ALIGN
         );
         assert_eq!(
-            capsule_mpc_feed_state(h, TARGET_C.as_ptr(), 2),
+            capsule_mpc_feed_state(hi, TARGET_C.as_ptr(), 2),
             CAPSULE_MPC_ERR_WRONG_LENGTH
         );
         assert_eq!(
-            capsule_mpc_feed_state(h, TARGET_C.as_ptr(), 5),
+            capsule_mpc_feed_state(hi, TARGET_C.as_ptr(), 5),
             CAPSULE_MPC_ERR_WRONG_LENGTH
         );
         assert_eq!(
-            capsule_mpc_feed_state(h, [0.0, f64::NAN, 0.0, 0.0].as_ptr(), 4),
+            capsule_mpc_feed_state(hi, [0.0, f64::NAN, 0.0, 0.0].as_ptr(), 4),
             CAPSULE_MPC_ERR_NON_FINITE
+        );
+        // Ideal sampling: tracking frames do not fit the mode.
+        assert_eq!(
+            capsule_mpc_feed_tracking(hi, ORIGIN.as_ptr(), 2, 0.0, 0),
+            CAPSULE_MPC_ERR_WRONG_FEED
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(hi, null(), 0, 0.0, 1),
+            CAPSULE_MPC_ERR_WRONG_FEED
+        );
+        assert_eq!(
+            capsule_mpc_feed_state(hi, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_OK
         );
     }
     // The lost frame is still the pending one: the cycle reports it.
@@ -448,6 +478,7 @@ fn feed_bad_args() {
         unsafe {
             capsule_mpc_next_actuation(
                 h,
+                T_ACT,
                 grads.as_mut_ptr(),
                 grads.len(),
                 &mut samples,
@@ -479,20 +510,21 @@ fn next_actuation_last_status_estimate_bad_args() {
         let before = estimate(h);
         let g = grads.as_mut_ptr();
         assert_eq!(
-            capsule_mpc_next_actuation(h, null_mut(), 64, &mut samples, &mut status),
+            capsule_mpc_next_actuation(h, T_ACT, null_mut(), 64, &mut samples, &mut status),
             CAPSULE_MPC_ERR_NULL_POINTER
         );
         assert_eq!(
-            capsule_mpc_next_actuation(h, g, 64, null_mut(), &mut status),
+            capsule_mpc_next_actuation(h, T_ACT, g, 64, null_mut(), &mut status),
             CAPSULE_MPC_ERR_NULL_POINTER
         );
         assert_eq!(
-            capsule_mpc_next_actuation(h, g, 64, &mut samples, null_mut()),
+            capsule_mpc_next_actuation(h, T_ACT, g, 64, &mut samples, null_mut()),
             CAPSULE_MPC_ERR_NULL_POINTER
         );
         assert_eq!(
             capsule_mpc_next_actuation(
                 h,
+                T_ACT,
                 misaligned_f64(&mut [0u64; 8]),
                 4,
                 &mut samples,
@@ -502,22 +534,37 @@ fn next_actuation_last_status_estimate_bad_args() {
         );
         let bad_u32 = words.as_mut_ptr().cast::<u8>().add(1).cast::<u32>();
         assert_eq!(
-            capsule_mpc_next_actuation(h, g, 64, bad_u32, &mut status),
+            capsule_mpc_next_actuation(h, T_ACT, g, 64, bad_u32, &mut status),
             CAPSULE_MPC_ERR_BAD_ALIGN
         );
         let bad_i32 = words.as_mut_ptr().cast::<u8>().add(2).cast::<i32>();
         assert_eq!(
-            capsule_mpc_next_actuation(h, g, 64, &mut samples, bad_i32),
+            capsule_mpc_next_actuation(h, T_ACT, g, 64, &mut samples, bad_i32),
             CAPSULE_MPC_ERR_BAD_ALIGN
         );
         assert_eq!(
-            capsule_mpc_next_actuation(h, g, 0, &mut samples, &mut status),
+            capsule_mpc_next_actuation(h, T_ACT, g, 0, &mut samples, &mut status),
             CAPSULE_MPC_ERR_WRONG_LENGTH
         );
         assert_eq!(
-            capsule_mpc_next_actuation(h, g, n - 1, &mut samples, &mut status),
+            capsule_mpc_next_actuation(h, T_ACT, g, n - 1, &mut samples, &mut status),
             CAPSULE_MPC_ERR_WRONG_LENGTH
         );
+        for t in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(
+                capsule_mpc_next_actuation(h, t, g, n, &mut samples, &mut status),
+                CAPSULE_MPC_ERR_NON_FINITE
+            );
+        }
+        // The frame was measured at 0 s: an actuation before it, or more
+        // than 1 s after it, is refused.
+        for t in [-0.001, 1.5, 1000.0] {
+            assert_eq!(
+                capsule_mpc_next_actuation(h, t, g, n, &mut samples, &mut status),
+                CAPSULE_MPC_ERR_BAD_TIME,
+                "{t}"
+            );
+        }
         // Nothing ran and nothing was written.
         assert_eq!(estimate(h), before);
         assert!(grads.iter().all(|&v| v == 7.0));
@@ -549,7 +596,7 @@ fn next_actuation_last_status_estimate_bad_args() {
 
         // Capacity = horizon is enough; the pending frame is consumed.
         assert_eq!(
-            capsule_mpc_next_actuation(h, g, n, &mut samples, &mut status),
+            capsule_mpc_next_actuation(h, T_ACT, g, n, &mut samples, &mut status),
             CAPSULE_MPC_OK
         );
         assert_eq!(status, CAPSULE_MPC_STATUS_OK);
@@ -628,6 +675,7 @@ fn closed_loop(mode: i32) -> [f64; 4] {
             let (mut samples, mut status) = (0u32, -1i32);
             let rc = capsule_mpc_next_actuation(
                 h,
+                t,
                 grads.as_mut_ptr(),
                 k as usize,
                 &mut samples,
@@ -695,6 +743,7 @@ fn wrong_reset_is_reacquired_through_the_c_abi() {
             let (mut samples, mut status) = (0u32, -1i32);
             let rc = capsule_mpc_next_actuation(
                 h,
+                t,
                 grads.as_mut_ptr(),
                 k as usize,
                 &mut samples,

@@ -121,6 +121,7 @@ fn rust_consts(src: &str) -> BTreeMap<String, i64> {
             "CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP" => {
                 CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP.into()
             }
+            "CAPSULE_MPC_STATUS_RECOVERING" => CAPSULE_MPC_STATUS_RECOVERING.into(),
             _ => panic!("no evaluator for {name}: add it to tests/header.rs"),
         }
     };
@@ -202,4 +203,82 @@ fn every_export_is_no_mangle() {
     let src = strip_comments(&read("src/lib.rs"));
     let exports = src.matches("extern \"C\" fn ").count();
     assert_eq!(src.matches("#[no_mangle]").count(), exports);
+}
+
+/// Every "N bytes" (digits grouped by spaces, e.g. "12 760 bytes") that
+/// follows the word "workspace" within `window` characters in `text`
+/// (whitespace normalized), and every "controller struct N".
+fn documented_sizes(text: &str, window: usize) -> (Vec<usize>, Vec<usize>) {
+    let flat: String = text.split_whitespace().collect::<Vec<_>>().join(" ");
+    let lower = flat.to_lowercase();
+    let number_before = |s: &str, end: usize| -> Option<usize> {
+        // Digits and single spaces between digit groups, ending at `end`.
+        let head = s[..end].trim_end();
+        let start = head
+            .char_indices()
+            .rev()
+            .take_while(|(_, c)| c.is_ascii_digit() || *c == ' ')
+            .last()
+            .map(|(i, _)| i)?;
+        let digits: String = head[start..]
+            .trim()
+            .chars()
+            .filter(|c| c.is_ascii_digit())
+            .collect();
+        digits.parse().ok()
+    };
+    let mut workspace = Vec::new();
+    let mut at = 0;
+    while let Some(i) = lower[at..].find("workspace") {
+        let from = at + i;
+        let until = (from + window).min(lower.len());
+        if let Some(b) = lower[from..until].find(" bytes") {
+            // Skip "capsule_mpc_workspace_size()` bytes" (no number).
+            if let Some(n) = number_before(&flat, from + b) {
+                workspace.push(n);
+            }
+        }
+        at = from + "workspace".len();
+    }
+    let mut controller = Vec::new();
+    let key = "controller struct ";
+    let mut at = 0;
+    while let Some(i) = lower[at..].find(key) {
+        let from = at + i + key.len();
+        let digits: String = flat[from..]
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == ' ')
+            .filter(|c| c.is_ascii_digit())
+            .collect();
+        controller.push(digits.parse().expect("a number after 'controller struct'"));
+        at = from;
+    }
+    (workspace, controller)
+}
+
+/// The workspace sizes the READMEs quote are the library's: the README's
+/// figures, the C embedding paragraph and the capi README all come from
+/// `capsule_mpc_workspace_size()` and the controller's size.
+#[test]
+fn documented_sizes_are_the_librarys() {
+    let size = capsule_mpc_capi::capsule_mpc_workspace_size();
+    let controller = core::mem::size_of::<capsule_mpc_runtime::DefaultController>();
+    let mut found = 0;
+    for rel in ["../README.md", "README.md"] {
+        let (ws, ctl) = documented_sizes(&read(rel), 40);
+        for n in ws {
+            assert_eq!(
+                n, size,
+                "{rel} quotes a {n}-byte workspace; capsule_mpc_workspace_size() = {size}"
+            );
+            found += 1;
+        }
+        for n in ctl {
+            assert_eq!(
+                n, controller,
+                "{rel} quotes a {n}-byte controller; size_of::<DefaultController>() = {controller}"
+            );
+        }
+    }
+    assert!(found >= 3, "expected the workspace size in both READMEs");
 }

@@ -1,6 +1,7 @@
 #!/bin/sh
 # Builds the capsule-mpc C library and this C host, then runs the host.
-# Usage: ./build.sh [mode] [noise_m]   (mode 0 ideal, 1 constant, 2 variable)
+# Usage: ./build.sh [mode] [noise_m] [tracking_s] [glitch_frames] [glitch_m]
+# (mode 0 ideal, 1 constant, 2 variable; see main.c)
 set -eu
 cd "$(dirname "$0")"
 cargo build --release -p capsule-mpc-capi

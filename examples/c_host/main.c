@@ -3,15 +3,22 @@
  *
  * Plant: two capsules on one gradient u (T/m):
  *   x' = v,  v' = -b v|v| + g u,  g = 173.25, b = 134.7 and 16.84 1/m,
- * integrated with RK4 at 1 ms. Timeline per cycle: tracking 20 ms (u = 0,
- * positions measured at its start), then the actuation samples the
- * controller returns (20 ms each). Scenario C: target (0.02, 0, -0.01, 0) m
- * from rest at the origin, 3 s of simulated time.
+ * integrated with RK4 at 1 ms. Timeline per cycle: a tracking phase (u = 0,
+ * positions measured at its start, 20 ms by default, or a length drawn
+ * between 10 and 60 ms every cycle), then the actuation samples the
+ * controller returns (20 ms each), time-stamped on the host's clock.
+ * Scenario C: target (0.02, 0, -0.01, 0) m from rest at the origin.
  *
- * Usage: c_host [mode] [noise_m]   mode 0 ideal, 1 constant (default),
- *        2 variable; noise_m: amplitude of deterministic measurement noise
- *        (default 5e-5 m).
- * Exit status 0 only when both positions end within 1 mm of the target.
+ * Usage: c_host [mode] [noise_m] [tracking_s] [glitch_frames] [glitch_m]
+ *        mode 0 ideal, 1 constant (default), 2 variable; noise_m: amplitude
+ *        of deterministic measurement noise (default 5e-5 m); tracking_s:
+ *        tracking phase length (default 0.02; 0 = jitter 10-60 ms);
+ *        glitch_frames / glitch_m: that many frames from 2 s on report both
+ *        positions glitch_m off (default 0 / 0.05).
+ * Exit status 0 only when the capsules settle (both positions within 1 mm
+ * of the target, both speeds below 5 mm/s, held for 1 s) no later than 3 s
+ * (default tracking; 6 s with other tracking lengths, whose duty is lower)
+ * or, with a glitch, 3 s after its last frame.
  */
 #include <math.h>
 #include <stdint.h>
@@ -24,7 +31,12 @@
 #define STEP_S 0.001
 #define TRACKING_S 0.020
 #define SIM_END_S 3.0
+#define GLITCH_START_S 2.0
 #define TOL_M 0.001
+#define SPEED_TOL 0.005
+#define HELD_S 1.0
+#define RECOVERY_S 3.0
+#define LONG_TRACKING_DEADLINE_S 6.0
 #define MAX_PLAN 256
 
 static const double G[NCAP] = {173.25, 173.25};
@@ -78,6 +90,9 @@ static double noise(uint32_t *seed) {
 int main(int argc, char **argv) {
     int mode = argc > 1 ? atoi(argv[1]) : CAPSULE_MPC_SAMPLING_CONSTANT;
     double noise_m = argc > 2 ? atof(argv[2]) : 5e-5;
+    double tracking_s = argc > 3 ? atof(argv[3]) : TRACKING_S;
+    int glitch_frames = argc > 4 ? atoi(argv[4]) : 0;
+    double glitch_m = argc > 5 ? atof(argv[5]) : 0.05;
 
     uint32_t capsules = 0, horizon = 0, plan_len = 0;
     double dt_s = 0.0, u_max = 0.0;
@@ -103,24 +118,40 @@ int main(int argc, char **argv) {
     double s[2 * NCAP] = {start[0], 0.0, start[1], 0.0};
     double t = 0.0;
     double grads[MAX_PLAN];
-    uint32_t seed = 12345u;
-    int cycles = 0, non_ok = 0;
+    uint32_t seed = 12345u, jitter_seed = 777u;
+    int cycles = 0, non_ok = 0, glitched = 0;
+    int counts[16] = {0};
+    /* Settled = both positions within TOL_M of the target and both speeds
+     * below SPEED_TOL for HELD_S in a row; it must start by the deadline. */
+    double deadline_s = tracking_s == TRACKING_S ? SIM_END_S : LONG_TRACKING_DEADLINE_S;
+    double last_bad_s = 0.0, band_since = -1.0, settled_s = -1.0;
     printf("# t_s x1_m x2_m u_T_per_m samples status\n");
-    while (t < SIM_END_S - 1e-9) {
+    while (t < deadline_s + HELD_S - 1e-9 && settled_s < 0.0) {
         if (mode == CAPSULE_MPC_SAMPLING_IDEAL) {
             /* Ideal: no tracking phase, the full state is known. */
             CHECK(capsule_mpc_feed_state(h, s, 2 * NCAP));
         } else {
             double z[NCAP];
             for (int i = 0; i < NCAP; i++) z[i] = s[2 * i] + noise_m * noise(&seed);
+            if (glitched < glitch_frames && t >= GLITCH_START_S - 1e-9) {
+                for (int i = 0; i < NCAP; i++) z[i] += glitch_m;
+                glitched++;
+                last_bad_s = t;
+                deadline_s = t + RECOVERY_S;
+                band_since = -1.0;
+            }
             double t_meas = t;
-            hold(s, 0.0, TRACKING_S, &t); /* tracking phase, gradients off */
+            /* Tracking phase, gradients off: fixed, or 10-60 ms in whole ms. */
+            double track = tracking_s > 0.0 ? tracking_s : 0.001 * (10 + (int)((noise(&jitter_seed) + 1.0) * 25.49));
+            hold(s, 0.0, track, &t);
             CHECK(capsule_mpc_feed_tracking(h, z, NCAP, t_meas, 0));
         }
         uint32_t samples = 0;
         int32_t status = 0;
-        CHECK(capsule_mpc_next_actuation(h, grads, plan_len, &samples, &status));
+        /* The actuation starts now, at the end of tracking. */
+        CHECK(capsule_mpc_next_actuation(h, t, grads, plan_len, &samples, &status));
         if (status != CAPSULE_MPC_STATUS_OK) non_ok++;
+        if (status >= 0 && status < 16) counts[status]++;
         for (uint32_t k = 0; k < samples; k++) {
             double u = grads[k];
             if (!(fabs(u) <= u_max)) {
@@ -129,18 +160,31 @@ int main(int argc, char **argv) {
             }
             printf("%.3f %.6f %.6f %+.5f %u %d\n", t, s[0], s[2], u, samples, (int)status);
             hold(s, u, dt_s, &t);
+            int inside = fabs(s[0] - target[0]) <= TOL_M && fabs(s[2] - target[2]) <= TOL_M &&
+                         fabs(s[1]) < SPEED_TOL && fabs(s[3]) < SPEED_TOL;
+            if (!inside) {
+                band_since = -1.0;
+            } else if (band_since < 0.0) {
+                band_since = t;
+            } else if (t - band_since >= HELD_S - 1e-9 && glitched >= glitch_frames) {
+                settled_s = band_since > last_bad_s ? band_since : last_bad_s;
+                break;
+            }
         }
         cycles++;
     }
-    double e1 = s[0] - target[0], e2 = s[2] - target[2];
+    printf("# statuses: ok %d, fallback %d, rejected %d, lost %d, reacquired %d, recovering %d\n",
+           counts[CAPSULE_MPC_STATUS_OK], counts[CAPSULE_MPC_STATUS_FALLBACK],
+           counts[CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED], counts[CAPSULE_MPC_STATUS_MEASUREMENT_LOST],
+           counts[CAPSULE_MPC_STATUS_REACQUIRED], counts[CAPSULE_MPC_STATUS_RECOVERING]);
     printf("# end t %.3f s after %d cycles (%d not OK): x1 %.6f m, x2 %.6f m, v1 %.2e, v2 %.2e\n", t, cycles,
            non_ok, s[0], s[2], s[1], s[3]);
-    printf("# final error: |x1 - x1*| = %.3f mm, |x2 - x2*| = %.3f mm (tolerance %.1f mm)\n", fabs(e1) * 1e3,
-           fabs(e2) * 1e3, TOL_M * 1e3);
-    if (fabs(e1) <= TOL_M && fabs(e2) <= TOL_M) {
-        printf("# PASS\n");
+    if (glitch_frames > 0) printf("# last glitch frame at %.3f s\n", last_bad_s);
+    if (settled_s >= 0.0 && settled_s <= deadline_s + 1e-9) {
+        printf("# settled (within %.1f mm, below %.0f mm/s, held %.1f s) from %.3f s, deadline %.3f s\n# PASS\n",
+               TOL_M * 1e3, SPEED_TOL * 1e3, HELD_S, settled_s, deadline_s);
         return 0;
     }
-    printf("# FAIL\n");
+    printf("# not settled by the deadline %.3f s\n# FAIL\n", deadline_s);
     return 1;
 }

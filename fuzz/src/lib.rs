@@ -140,7 +140,7 @@ fn dims() -> (usize, usize, usize, f64) {
     (n as usize, k as usize, m as usize, u_max)
 }
 
-const CODES: [i32; 10] = [
+const CODES: [i32; 14] = [
     capi::CAPSULE_MPC_OK,
     capi::CAPSULE_MPC_ERR_NULL_POINTER,
     capi::CAPSULE_MPC_ERR_BAD_SIZE,
@@ -151,7 +151,14 @@ const CODES: [i32; 10] = [
     capi::CAPSULE_MPC_ERR_BAD_MODE,
     capi::CAPSULE_MPC_ERR_NOT_INITIALIZED,
     capi::CAPSULE_MPC_ERR_BAD_SETTING,
+    capi::CAPSULE_MPC_ERR_BAD_TIME,
+    capi::CAPSULE_MPC_ERR_WRONG_FEED,
+    capi::CAPSULE_MPC_ERR_LOOP_RUNNING,
+    capi::CAPSULE_MPC_ERR_TARGET_NOT_AT_REST,
 ];
+
+/// Largest `CAPSULE_MPC_STATUS_*` value.
+const LAST_STATUS: i32 = capi::CAPSULE_MPC_STATUS_RECOVERING;
 
 fn check_code(what: &str, rc: i32) -> i32 {
     assert!(CODES.contains(&rc), "{what}: undocumented return code {rc}");
@@ -227,6 +234,8 @@ pub fn capi(data: &[u8]) {
         assert_eq!(rc, capi::CAPSULE_MPC_OK);
     }
 
+    // The host's clock: the end of the last actuation phase returned.
+    let mut clock = 0.0f64;
     let mut steps = 0usize;
     while let Some(op) = inp.byte() {
         steps += 1;
@@ -242,14 +251,21 @@ pub fn capi(data: &[u8]) {
                 };
                 let Some(t) = inp.f64() else { return };
                 let Some(lost) = inp.byte() else { return };
+                // A plausible time (the clock) or the fuzzed one.
+                let t = if lost & 2 == 0 { clock } else { t };
                 let lost = i32::from(lost % 4 == 0);
                 let rc = check_code("feed_tracking", unsafe {
                     capi::capsule_mpc_feed_tracking(h, p, n, t, lost)
                 });
-                if !t.is_finite() {
+                if rc == capi::CAPSULE_MPC_ERR_WRONG_FEED {
+                    // Ideal sampling: frames do not fit, whatever they are.
+                } else if !t.is_finite() {
                     assert_eq!(rc, capi::CAPSULE_MPC_ERR_NON_FINITE);
                 } else if lost != 0 {
-                    assert_eq!(rc, capi::CAPSULE_MPC_OK);
+                    assert!(
+                        [capi::CAPSULE_MPC_OK, capi::CAPSULE_MPC_ERR_BAD_TIME].contains(&rc),
+                        "lost frame at {t}: {rc}"
+                    );
                 }
             }
             1 => {
@@ -263,14 +279,26 @@ pub fn capi(data: &[u8]) {
                 let rc = check_code("feed_state", unsafe {
                     capi::capsule_mpc_feed_state(h, p, n)
                 });
-                if !p.is_null() && n == NX && x.iter().all(|v| v.is_finite()) {
+                if !p.is_null()
+                    && n == NX
+                    && x.iter().all(|v| v.is_finite())
+                    && rc != capi::CAPSULE_MPC_ERR_WRONG_FEED
+                {
                     assert_eq!(rc, capi::CAPSULE_MPC_OK);
                 }
             }
             2 => {
                 let Some(sel) = inp.byte() else { return };
                 let capacity = [n_horizon, k_plan, k_plan + 5, n_horizon - 1, 0][sel as usize % 5];
-                next_actuation(h, capacity, n_horizon, k_plan, u_max);
+                let t = if sel & 8 == 0 {
+                    clock + 0.02
+                } else {
+                    let Some(t) = inp.f64() else { return };
+                    t
+                };
+                if let Some(end) = next_actuation(h, t, capacity, n_horizon, k_plan, u_max) {
+                    clock = end;
+                }
             }
             3 => {
                 let Some(t) = inp.array::<NX>() else { return };
@@ -303,13 +331,18 @@ pub fn capi(data: &[u8]) {
                 });
                 if !(0..=2).contains(&mode) {
                     assert_eq!(rc, capi::CAPSULE_MPC_ERR_BAD_MODE);
+                } else {
+                    assert!(
+                        [capi::CAPSULE_MPC_OK, capi::CAPSULE_MPC_ERR_LOOP_RUNNING].contains(&rc),
+                        "set_sampling({mode}): {rc}"
+                    );
                 }
             }
             6 => {
                 let mut s = -100i32;
                 let rc = unsafe { capi::capsule_mpc_last_status(h, &mut s) };
                 assert_eq!(rc, capi::CAPSULE_MPC_OK);
-                assert!((0..=7).contains(&s), "last status {s}");
+                assert!((0..=LAST_STATUS).contains(&s), "last status {s}");
             }
             7 => {
                 let Some(sel) = inp.byte() else { return };
@@ -374,9 +407,13 @@ pub fn capi(data: &[u8]) {
                     assert_eq!(rc, capi::CAPSULE_MPC_OK);
                     let z = [x[0] + offset, x[2] - offset];
                     check_code("feed_tracking", unsafe {
-                        capi::capsule_mpc_feed_tracking(h, z.as_ptr(), M, 0.0, 0)
+                        capi::capsule_mpc_feed_tracking(h, z.as_ptr(), M, clock, 0)
                     });
-                    next_actuation(h, n_horizon, n_horizon, k_plan, u_max);
+                    if let Some(end) =
+                        next_actuation(h, clock + 0.02, n_horizon, n_horizon, k_plan, u_max)
+                    {
+                        clock = end;
+                    }
                 }
             }
             _ => {
@@ -409,6 +446,7 @@ pub fn capi(data: &[u8]) {
                         assert_eq!(
                             capi::capsule_mpc_next_actuation(
                                 handle,
+                                0.0,
                                 g.as_mut_ptr(),
                                 64,
                                 &mut n,
@@ -429,34 +467,43 @@ pub fn capi(data: &[u8]) {
 }
 
 /// One `capsule_mpc_next_actuation` with output checks.
+/// `capsule_mpc_next_actuation` for an actuation starting at `t` with its
+/// contracts; the end of the returned actuation phase, s, on success.
 fn next_actuation(
     h: *mut capi::CapsuleMpc,
+    t: f64,
     capacity: usize,
     n_horizon: usize,
     k_plan: usize,
     u_max: f64,
-) {
+) -> Option<f64> {
     const SENTINEL: u64 = 0x7ff8_dead_beef_0002;
     let mut g = vec![f64::from_bits(SENTINEL); capacity.max(1) + 4];
     let (mut samples, mut status) = (u32::MAX, i32::MIN);
     let rc = check_code("next_actuation", unsafe {
-        capi::capsule_mpc_next_actuation(h, g.as_mut_ptr(), capacity, &mut samples, &mut status)
+        capi::capsule_mpc_next_actuation(h, t, g.as_mut_ptr(), capacity, &mut samples, &mut status)
     });
     if rc != capi::CAPSULE_MPC_OK {
-        assert!(capacity < n_horizon, "next_actuation failed with {rc}");
-        assert_eq!(rc, capi::CAPSULE_MPC_ERR_WRONG_LENGTH);
+        let expected = if capacity < n_horizon {
+            capi::CAPSULE_MPC_ERR_WRONG_LENGTH
+        } else if !t.is_finite() {
+            capi::CAPSULE_MPC_ERR_NON_FINITE
+        } else {
+            capi::CAPSULE_MPC_ERR_BAD_TIME
+        };
+        assert_eq!(rc, expected, "next_actuation at {t} s, capacity {capacity}");
         assert!(
             g.iter().all(|v| v.to_bits() == SENTINEL),
             "written on error"
         );
         assert_eq!((samples, status), (u32::MAX, i32::MIN), "written on error");
-        return;
+        return None;
     }
     assert!(
         (1..=n_horizon as u32).contains(&samples),
         "samples {samples}"
     );
-    assert!((0..=7).contains(&status), "status {status}");
+    assert!((0..=LAST_STATUS).contains(&status), "status {status}");
     let written = capacity.min(k_plan);
     for (k, u) in g[..written].iter().enumerate() {
         assert!(
@@ -468,6 +515,7 @@ fn next_actuation(
         g[written..].iter().all(|v| v.to_bits() == SENTINEL),
         "written past the plan"
     );
+    Some(t + f64::from(samples) * 0.02)
 }
 
 // ---------------------------------------------------------------------------
@@ -578,10 +626,43 @@ fn run_controller<S: PlanSolver<NX2, K>, const NX2: usize, const K: usize>(
             eprintln!("op {} estimate {:?}", op % 8, c.estimate());
         }
         match op % 8 {
-            0..=2 => {
+            0 | 1 => {
                 let Some(z) = inp.array::<2>() else { return };
                 let out = c.cycle(Some(&z[..m.min(2)])).unwrap();
                 check(&out, &c);
+            }
+            2 => {
+                // On the host's clock: a plausible time stamp (the last
+                // actuation end, then a 10-60 ms tracking phase) or fuzzed.
+                let Some(z) = inp.array::<2>() else { return };
+                let Some(sel) = inp.byte() else { return };
+                let Some(fuzzed) = inp.array::<2>() else {
+                    return;
+                };
+                let end = c.actuation_end_s().unwrap_or(0.0);
+                let (t_meas, t_act) = if sel % 4 == 0 {
+                    (fuzzed[0], fuzzed[1])
+                } else {
+                    (end, end + 0.01 * f64::from(1 + sel % 6))
+                };
+                let frame = (sel & 16 == 0).then_some(&z[..m.min(2)]);
+                match c.cycle_at(frame, t_meas, t_act) {
+                    Ok(out) => {
+                        check(&out, &c);
+                        assert_eq!(
+                            c.actuation_end_s(),
+                            Some(t_act + out.actuation_samples as f64 * S::DT_S)
+                        );
+                    }
+                    Err(RuntimeError::NonFinite(name)) | Err(RuntimeError::BadTime(name)) => {
+                        assert!(sel % 4 == 0, "plausible times refused: {name}");
+                        assert!(
+                            ["t_measured_s", "t_actuation_start_s"].contains(&name),
+                            "{name}"
+                        );
+                    }
+                    Err(e) => panic!("cycle_at: {e:?}"),
+                }
             }
             3 => {
                 let out = c.cycle(None).unwrap();
@@ -614,7 +695,7 @@ fn run_controller<S: PlanSolver<NX2, K>, const NX2: usize, const K: usize>(
                     Err(RuntimeError::NonFinite("target"))
                     | Err(RuntimeError::TargetOutOfRange)
                     | Err(RuntimeError::OutsideWorkspace { .. })
-                    | Err(RuntimeError::TargetSpeedNotZero { .. }) => {}
+                    | Err(RuntimeError::TargetNotAtRest) => {}
                     Err(e) => panic!("set_target: {e:?}"),
                 }
             }

@@ -38,9 +38,11 @@ pub struct ControllerSettings {
     /// solve from the measured state and treat the delay as a disturbance
     /// (false, the paper's way).
     pub compensate_delay: bool,
-    /// Tracking phase duration, s.
+    /// Tracking phase duration, s: the fixed timing of
+    /// [`Controller::cycle`], and the gap the plans model until
+    /// [`Controller::cycle_at`] has measured one.
     pub tracking_time_s: f64,
-    /// Extra compute/transfer delay after tracking, s.
+    /// Extra compute/transfer delay after tracking, s (as `tracking_time_s`).
     pub extra_delay_s: f64,
     /// Measurement noise standard deviation, m.
     pub position_noise_m: f64,
@@ -60,12 +62,22 @@ pub struct ControllerSettings {
     pub hold_release_speed_m_per_s: f64,
     /// Re-acquisition: after this many gated-out frames in a row (finite,
     /// within `MAX_ABS_POSITION_M`, but beyond `MEASUREMENT_GATE_NIS` of the
-    /// estimate) with no accepted frame in between, the estimate is taken
-    /// to be wrong (e.g. a `reset` to the wrong place) and is restarted at
-    /// the measured positions. Lost and invalid frames neither count nor
+    /// estimate) that agree with one another, with no accepted frame in
+    /// between, the estimate is taken to be wrong (e.g. a `reset` to the
+    /// wrong place) and is restarted from those frames: positions and
+    /// speeds from a filter run over them (see `glitch_frames` for an
+    /// established estimate). Lost and invalid frames neither count nor
     /// break the run. 0 disables re-acquisition; 1 is refused (every single
     /// outlier would restart the estimate).
     pub reacquire_after_rejections: usize,
+    /// Tracking glitches: an estimate confirmed by at least
+    /// `ESTABLISHED_AFTER_FRAMES` accepted frames since the last `reset` or
+    /// re-acquisition is a physical track that cannot jump, so gated-out
+    /// frames that contradict it, even when they agree with one another,
+    /// are taken for a glitch of the tracking and rejected for up to this
+    /// many frames in a row; the next one re-acquires (never before
+    /// `reacquire_after_rejections`).
+    pub glitch_frames: usize,
 }
 impl ControllerSettings {
     /// Tracking phase + extra delay: the zero-gradient wait between a
@@ -80,10 +92,17 @@ impl ControllerSettings {
     /// sampling plays one sample per phase; variable sampling plays
     /// `phase_samples`.
     pub fn schedule(&self, phase_samples: usize) -> (usize, f64) {
+        self.schedule_with_gap(phase_samples, self.wait_s())
+    }
+
+    /// [`ControllerSettings::schedule`] with a zero-gradient gap of `gap_s`
+    /// between phases instead of the configured `wait_s()` (the gap the
+    /// host's time stamps show, see `Controller::cycle_at`).
+    pub fn schedule_with_gap(&self, phase_samples: usize, gap_s: f64) -> (usize, f64) {
         match self.sampling {
             Sampling::Ideal => (phase_samples, 0.0),
-            Sampling::Constant => (1, self.wait_s()),
-            Sampling::Variable => (phase_samples, self.wait_s()),
+            Sampling::Constant => (1, gap_s),
+            Sampling::Variable => (phase_samples, gap_s),
         }
     }
 }
@@ -108,6 +127,42 @@ pub const HOLD_MAX_GRADIENT_FRACTION: f64 = 0.25;
 /// outliers in a row, with none of the frames between them accepted, are
 /// far likelier a wrong estimate than wrong data.
 pub const REACQUIRE_AFTER_REJECTIONS: usize = 5;
+/// Default `ControllerSettings::glitch_frames`: 0.8 s of tracking frames at
+/// the default constant sampling.
+pub const GLITCH_FRAMES: usize = 20;
+/// Accepted frames after which an estimate counts as established (see
+/// `ControllerSettings::glitch_frames`).
+pub const ESTABLISHED_AFTER_FRAMES: usize = 2;
+
+/// Largest gap between the end of one actuation phase and the start of
+/// the next that `Controller::cycle_at` accepts, s. Tracking phases are
+/// tens of ms; a longer pause means the loop stopped (call `reset`).
+pub const MAX_CYCLE_GAP_S: f64 = 1.0;
+/// How far a measurement time may precede the end of the previous
+/// actuation phase (clock rounding between host and controller), s. Within
+/// it the measurement is taken at the actuation end.
+pub const TIME_TOLERANCE_S: f64 = 1.0e-3;
+/// Weight of the newest gap in the running estimate of the tracking gap
+/// the plans model (exponential smoothing): jittering tracking phases are
+/// modelled by about their mean, a change of length is followed within a
+/// few cycles.
+pub const GAP_SMOOTHING: f64 = 0.3;
+/// Speed below which the fallback considers a capsule at rest, m/s (the
+/// settle tolerance).
+pub const REST_SPEED_M_PER_S: f64 = 5.0e-3;
+/// Coasting horizon the fallback's braking law minimizes the drift over, s.
+pub const BRAKING_HORIZON_S: f64 = 1.0;
+/// After re-acquisition the estimate it replaced is kept as an alternative
+/// (a frame glitch re-acquires onto the glitch; when true frames return
+/// they match the replaced estimate) until its position uncertainty
+/// exceeds this, m.
+pub const REPLACED_TRACK_MAX_STD_M: f64 = 5.0e-3;
+
+/// An accepted frame whose normalized innovation squared (summed over the
+/// capsules) exceeds this (3 sigma) keeps the estimate before it as the
+/// replaced track (see `REPLACED_TRACK_MAX_STD_M`); a gated-out frame
+/// within it of the replaced track restores that track.
+pub const REPLACED_TRACK_NIS: f64 = 9.0;
 
 /// A waypoint counts as reached when every position is within this of it, m
 /// (the next leg's plan absorbs the residual).
@@ -119,8 +174,9 @@ pub const WAYPOINT_SPEED_M_PER_S: f64 = 20.0e-3;
 pub const REPLAN_SPEED_M_PER_S: f64 = 20.0e-3;
 
 /// Normalized innovation squared above which a measurement is rejected
-/// (10 sigma: only gross outliers and wrong data).
-pub const MEASUREMENT_GATE_NIS: f64 = 100.0;
+/// (5 sigma: with Gaussian tracking noise about one frame in two million;
+/// glitches of a few mm at rest are caught, see `glitch_frames`).
+pub const MEASUREMENT_GATE_NIS: f64 = 25.0;
 /// Positions farther than this from the origin are not physical, m.
 pub const MAX_ABS_POSITION_M: f64 = 1.0;
 /// Speeds above this are not physical, m/s (terminal speeds at u_max: 0.23
@@ -137,27 +193,40 @@ pub const MIN_ACCEL_PSD: f64 = 1.0e-6;
 #[repr(C)]
 pub enum RuntimeStatus {
     Ok = 0,
-    /// The state is outside the tables: a bounded braking input is applied.
+    /// The state is outside the tables: one braking sample (see
+    /// [`braking_gradient`]), never an extrapolated table value. The next
+    /// cycle looks the state up again; at rest outside the tables it starts
+    /// a recovery leg (`Recovering`).
     Fallback = 1,
     /// A QP hit its iteration bound; the best feasible plan was used.
     IterationLimit = 2,
-    /// The measurement was non-finite or implausible and was ignored.
+    /// The measurement was non-finite, beyond `MAX_ABS_POSITION_M`, beyond
+    /// the innovation gate, or part of a glitch (see
+    /// `ControllerSettings::glitch_frames`), and was ignored: the estimate
+    /// was predicted only.
     MeasurementRejected = 3,
     /// No measurement this cycle: the estimate was predicted only.
     MeasurementLost = 4,
     /// No target set: zero gradient.
     NoTarget = 5,
-    /// `reacquire_after_rejections` frames in a row disagreed with the
-    /// estimate: it was restarted at this frame's positions (speeds zero,
-    /// wide uncertainty) and the plan restarted. Reported for that one
-    /// cycle whatever the plan (which may be the fallback or, without a
-    /// target, zero).
+    /// The estimate jumped: `reacquire_after_rejections` gated-out frames
+    /// in a row that agree with one another (`glitch_frames` + 1 against an
+    /// established estimate) replaced it, with the positions and speeds they
+    /// show; or frames returned to the estimate the last re-acquisition
+    /// replaced (a glitch ended) and it was restored. The plan restarted.
+    /// Reported for that one cycle whatever the plan (which may be the
+    /// fallback or, without a target, zero).
     Reacquired = 6,
     /// A QP of this solve took more active-set iterations than the offline
     /// map (`capsule-mpc generate`) measured in the state's index cell: the
     /// plan converged and is used, but the state lies outside what the
     /// offline worst-case timing covered.
     AboveIterationMap = 7,
+    /// The state was outside the tables' range at rest (after the fallback
+    /// braked it): the controller is moving the capsules along a stored plan
+    /// to an intermediate point from which the tables reach the target
+    /// (one or more legs), then plans to the target itself.
+    Recovering = 8,
 }
 
 /// Errors of calls with bad arguments (nothing changes when one is returned).
@@ -179,10 +248,14 @@ pub enum RuntimeError {
         capsule: usize,
         excess_m: f64,
     },
-    /// A target speed is not zero: targets are rest states.
-    TargetSpeedNotZero { capsule: usize },
     /// A setting is out of its range; names it.
     BadSetting(&'static str),
+    /// A time stamp is implausible: before the previous actuation ended
+    /// (time going backwards), an actuation start before its measurement,
+    /// or a gap above `MAX_CYCLE_GAP_S`; names the argument.
+    BadTime(&'static str),
+    /// A target speed is not zero: the plans bring the capsules to rest.
+    TargetNotAtRest,
 }
 
 /// What one cycle returns.
@@ -229,6 +302,28 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     /// Gated-out frames since the last accepted one (see
     /// `ControllerSettings::reacquire_after_rejections`).
     gated_rejections: usize,
+    /// Re-acquisition candidate: a filter started at the first gated-out
+    /// frame and updated with the gated-out frames that agree with it, so
+    /// that a re-acquired estimate has speeds from the frames.
+    candidate: [CapsuleFilter; NX],
+    /// Frames the candidate has absorbed (0: none).
+    candidate_frames: usize,
+    /// The estimate the last re-acquisition replaced, predicted along (see
+    /// `REPLACED_TRACK_MAX_STD_M`).
+    replaced: [CapsuleFilter; NX],
+    has_replaced: bool,
+    /// Frames accepted since the last `reset` or re-acquisition (see
+    /// `ControllerSettings::glitch_frames`).
+    confirmed_frames: usize,
+    /// The legs were re-planned after a fallback (`Recovering` until the
+    /// last leg).
+    recovering: bool,
+    /// End of the last actuation phase on the host's clock, s (`cycle_at`;
+    /// None before the first timed cycle, after `reset` and after `cycle`).
+    actuation_end_s: Option<f64>,
+    /// Running estimate of the zero-gradient gap between actuation phases
+    /// (tracking + delay), s: the coast the plans model.
+    gap_s: f64,
 }
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
@@ -248,6 +343,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             hold_release_position_m: HOLD_RELEASE_POSITION_M,
             hold_release_speed_m_per_s: HOLD_RELEASE_SPEED_M_PER_S,
             reacquire_after_rejections: REACQUIRE_AFTER_REJECTIONS,
+            glitch_frames: GLITCH_FRAMES,
         }
     }
 
@@ -269,6 +365,14 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             planned_phase_samples: settings.max_actuation_samples,
             mean_gain: mean_gradient_gain::<S, NX, K>(),
             gated_rejections: 0,
+            candidate: [CapsuleFilter::new(0.0, 0.0); NX],
+            candidate_frames: 0,
+            replaced: [CapsuleFilter::new(0.0, 0.0); NX],
+            has_replaced: false,
+            confirmed_frames: 0,
+            recovering: false,
+            actuation_end_s: None,
+            gap_s: settings.wait_s(),
         };
         c.reset(positions_m)?;
         Ok(c)
@@ -288,22 +392,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.filters[i] = CapsuleFilter::new(p, std);
         }
         self.gated_rejections = 0;
+        self.candidate_frames = 0;
+        self.has_replaced = false;
+        self.confirmed_frames = 0;
+        // A new start: the host's clock restarts too.
+        self.actuation_end_s = None;
         self.restart_plan();
         Ok(())
-    }
-
-    /// Restarts the estimate at measured positions `z` (length checked by
-    /// the caller). Unlike `reset`, the capsules are not known to be at
-    /// rest: the controller has been pushing them from a wrong estimate,
-    /// so the speed uncertainty is wide enough for the next frame to pass
-    /// the gate and fix the speeds.
-    fn reacquire(&mut self, z: &[f64]) {
-        let std = self.settings.position_noise_m.max(1e-6);
-        for (i, &p) in z.iter().enumerate() {
-            self.filters[i] = CapsuleFilter::with_speed_std(p, std, REACQUIRE_SPEED_STD_M_PER_S);
-        }
-        self.gated_rejections = 0;
-        self.restart_plan();
     }
 
     /// Forgets the plan and the mode (new start state or new target).
@@ -317,10 +412,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     /// Tells the solver how the plan will be played: ideal sampling plays
-    /// it back to back; otherwise each actuation phase is followed by
-    /// tracking + delay at zero gradient.
+    /// it back to back; otherwise each actuation phase is followed by the
+    /// zero-gradient gap (tracking + delay) the recent cycles showed.
     fn update_schedule(&mut self) {
-        let (samples, coast_s) = self.settings.schedule(self.planned_phase_samples);
+        let (samples, coast_s) = self
+            .settings
+            .schedule_with_gap(self.planned_phase_samples, self.gap_s);
         self.solver.set_schedule(samples, coast_s);
     }
 
@@ -365,21 +462,23 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     /// Sets a new target `[x1, v1, x2, v2, ...]`: positions inside the
-    /// workspace, speeds 0. Reached from wherever the capsules are, through
-    /// waypoints when one stored plan does not reach (see [`Leg`]); the
-    /// plan restarts.
+    /// workspace, speeds exactly 0 (the plans bring the capsules to rest; a
+    /// moving target is refused with `TargetNotAtRest`). Reached from
+    /// wherever the capsules are, through waypoints when one stored plan
+    /// does not reach (see [`Leg`]); the plan restarts.
     pub fn set_target(&mut self, target: &[f64; NX]) -> Result<(), RuntimeError> {
         if target.iter().any(|v| !v.is_finite()) {
             return Err(RuntimeError::NonFinite("target"));
         }
-        if let Some(capsule) = (0..NX / 2).find(|&i| target[2 * i + 1] != 0.0) {
-            return Err(RuntimeError::TargetSpeedNotZero { capsule });
+        if (0..NX / 2).any(|i| target[2 * i + 1] != 0.0) {
+            return Err(RuntimeError::TargetNotAtRest);
         }
         check_workspace::<S, NX, K>("target", target, 2)?;
         let x = self.estimate();
         let leg = Self::leg_from(&x, target).ok_or(RuntimeError::TargetOutOfRange)?;
         self.final_target = *target;
         self.has_target = true;
+        self.recovering = false;
         self.apply_leg(&x, &leg);
         self.restart_plan();
         Ok(())
@@ -397,6 +496,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// Heads for the end of `leg`, starting from `x`.
     fn apply_leg(&mut self, x: &[f64; NX], leg: &Leg<NX>) {
         self.on_last_leg = leg.last;
+        if leg.last {
+            self.recovering = false;
+        }
         if leg.last {
             self.target = self.final_target;
         } else {
@@ -465,53 +567,126 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.filters[i].mean = [x[2 * i], x[2 * i + 1]];
         }
         self.gated_rejections = 0;
+        self.candidate_frames = 0;
+        self.has_replaced = false;
+        self.confirmed_frames = self.confirmed_frames.saturating_add(1);
         Ok(self.plan_from(x, RuntimeStatus::Ok, 1))
     }
 
-    /// One scanner cycle. `measured_positions_m` are the tracked positions
-    /// at the start of the tracking phase that just ended (None: frame lost).
-    /// Returns the gradients to play from the actuation start and how many
-    /// samples to play before the next tracking phase.
+    /// One scanner cycle with the configured timing: the frame
+    /// `measured_positions_m` (None: lost) was measured at the end of the
+    /// previous actuation phase and the actuation starts
+    /// `settings().wait_s()` (tracking + extra delay) later. Returns the
+    /// gradients to play from the actuation start and how many samples to
+    /// play before the next tracking phase. Hosts whose tracking phases
+    /// vary, or that know their clock, use [`Controller::cycle_at`].
     pub fn cycle(
         &mut self,
         measured_positions_m: Option<&[f64]>,
     ) -> Result<CycleOutput<K>, RuntimeError> {
-        let m = NX / 2;
-        let mut status = RuntimeStatus::Ok;
-        match measured_positions_m {
-            None => status = RuntimeStatus::MeasurementLost,
-            Some(z) if z.len() != m => {
-                return Err(RuntimeError::WrongLength("measured_positions_m"))
-            }
-            Some(z) => match self.classify_measurement(z) {
-                Measurement::Invalid => status = RuntimeStatus::MeasurementRejected,
-                Measurement::GatedOut => {
-                    self.gated_rejections = self.gated_rejections.saturating_add(1);
-                    let after = self.settings.reacquire_after_rejections;
-                    if after != 0 && self.gated_rejections >= after {
-                        self.reacquire(z);
-                        status = RuntimeStatus::Reacquired;
-                    } else {
-                        status = RuntimeStatus::MeasurementRejected;
-                    }
-                }
-                Measurement::Accepted => {
-                    self.gated_rejections = 0;
-                    let r = sq(self.settings.position_noise_m.max(1e-6));
-                    for (i, &zi) in z.iter().enumerate() {
-                        let f = &mut self.filters[i];
-                        f.update(zi, r);
-                        // Behind a wide gate (just after re-acquisition, or
-                        // with a large disturbance bound) one frame can
-                        // imply any speed; beyond the physical range the
-                        // model's prediction overflows to NaN.
-                        f.mean[1] = f.mean[1].clamp(-MAX_ABS_SPEED_M_PER_S, MAX_ABS_SPEED_M_PER_S);
-                    }
-                }
-            },
-        }
-        // Tracking + delay pass with u = 0 before the next actuation.
+        check_frame_length::<NX>(measured_positions_m)?;
         let wait_s = self.settings.wait_s();
+        // No clock: a later `cycle_at` starts a new time base.
+        self.actuation_end_s = None;
+        Ok(self.step(measured_positions_m, 0.0, wait_s, (wait_s, false)))
+    }
+
+    /// One scanner cycle on the host's clock. `measured_positions_m` (None:
+    /// lost) were measured at `t_measured_s`, at the start of the tracking
+    /// phase that just ended; the actuation starts at
+    /// `t_actuation_start_s`. The estimate is predicted at zero gradient
+    /// from the end of the previous actuation phase to the measurement and
+    /// on to the actuation start, and the plans model the gap between
+    /// actuation phases these time stamps show (smoothed over cycles,
+    /// `GAP_SMOOTHING`), so tracking phases of any length, fixed or
+    /// varying, are handled.
+    ///
+    /// Refused with `BadTime` naming the argument, changing nothing: a
+    /// measurement before the previous actuation ended (more than
+    /// `TIME_TOLERANCE_S`: time going backwards), an actuation start before
+    /// the measurement, or more than `MAX_CYCLE_GAP_S` from the previous
+    /// actuation end (or from the measurement, on the first timed cycle) to
+    /// the actuation start. After a longer pause, `reset`.
+    pub fn cycle_at(
+        &mut self,
+        measured_positions_m: Option<&[f64]>,
+        t_measured_s: f64,
+        t_actuation_start_s: f64,
+    ) -> Result<CycleOutput<K>, RuntimeError> {
+        check_frame_length::<NX>(measured_positions_m)?;
+        let (before_s, wait_s, gap_s) = self.check_times(t_measured_s, t_actuation_start_s)?;
+        let first = self.actuation_end_s.is_none();
+        let out = self.step(measured_positions_m, before_s, wait_s, (gap_s, first));
+        self.actuation_end_s = Some(t_actuation_start_s + out.actuation_samples as f64 * S::DT_S);
+        Ok(out)
+    }
+
+    /// End of the last actuation phase on the host's clock (the instant
+    /// `estimate()` describes after a `cycle_at`), s.
+    pub fn actuation_end_s(&self) -> Option<f64> {
+        self.actuation_end_s
+    }
+
+    /// Checks a measurement time against the end of the previous actuation
+    /// phase: `BadTime("t_measured_s")` when it goes backwards, otherwise
+    /// the zero-gradient time from the previous actuation end to it, s.
+    pub fn check_measurement_time(&self, t_measured_s: f64) -> Result<f64, RuntimeError> {
+        if !t_measured_s.is_finite() {
+            return Err(RuntimeError::NonFinite("t_measured_s"));
+        }
+        match self.actuation_end_s {
+            None => Ok(0.0),
+            Some(end_s) => {
+                if t_measured_s < end_s - TIME_TOLERANCE_S {
+                    return Err(RuntimeError::BadTime("t_measured_s"));
+                }
+                if t_measured_s - end_s > MAX_CYCLE_GAP_S {
+                    return Err(RuntimeError::BadTime("t_measured_s"));
+                }
+                Ok((t_measured_s - end_s).max(0.0))
+            }
+        }
+    }
+
+    /// (previous actuation end -> measurement, measurement -> actuation
+    /// start, previous actuation end -> actuation start), s, or the error.
+    fn check_times(
+        &self,
+        t_measured_s: f64,
+        t_actuation_start_s: f64,
+    ) -> Result<(f64, f64, f64), RuntimeError> {
+        let before_s = self.check_measurement_time(t_measured_s)?;
+        if !t_actuation_start_s.is_finite() {
+            return Err(RuntimeError::NonFinite("t_actuation_start_s"));
+        }
+        let wait_s = t_actuation_start_s - t_measured_s;
+        if wait_s < 0.0 || before_s + wait_s > MAX_CYCLE_GAP_S {
+            return Err(RuntimeError::BadTime("t_actuation_start_s"));
+        }
+        Ok((before_s, wait_s, before_s + wait_s))
+    }
+
+    /// The cycle after argument checks: predict `before_s` at zero gradient
+    /// to the measurement, fuse it, predict `wait_s` to the actuation
+    /// start, fold `gap.0` (the gap between the last actuation phase and
+    /// this one; `gap.1`: the first of a time base) into the gap the plans
+    /// model, plan.
+    fn step(
+        &mut self,
+        measured_positions_m: Option<&[f64]>,
+        before_s: f64,
+        wait_s: f64,
+        gap: (f64, bool),
+    ) -> CycleOutput<K> {
+        if before_s > 0.0 {
+            self.predict_filters(0.0, before_s);
+        }
+        let status = match measured_positions_m {
+            None => RuntimeStatus::MeasurementLost,
+            Some(z) => self.fuse(z),
+        };
+        self.note_gap(gap.0, gap.1);
+        // Tracking + delay pass with u = 0 before the next actuation.
         let measured = self.estimate();
         self.predict_filters(0.0, wait_s);
         let x_start = if self.settings.compensate_delay {
@@ -533,7 +708,123 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         for k in 0..out.actuation_samples {
             self.predict_filters(out.gradients_t_per_m[k], S::DT_S);
         }
-        Ok(out)
+        out
+    }
+
+    /// Folds a measured gap between actuation phases into the running
+    /// estimate the plans model (`GAP_SMOOTHING`; the first cycle of a time
+    /// base takes its gap as is).
+    fn note_gap(&mut self, gap_s: f64, first: bool) {
+        let next = if first {
+            gap_s
+        } else {
+            self.gap_s + GAP_SMOOTHING * (gap_s - self.gap_s)
+        };
+        if next != self.gap_s {
+            self.gap_s = next;
+            self.update_schedule();
+        }
+    }
+
+    /// Fuses frame `z` (length checked): accepted, rejected as invalid,
+    /// gated out (counted towards re-acquisition), or re-acquired.
+    fn fuse(&mut self, z: &[f64]) -> RuntimeStatus {
+        let r = sq(self.settings.position_noise_m.max(1e-6));
+        let mut class = self.classify_measurement(z);
+        if class == Measurement::Accepted && self.continues_candidate(z, r) {
+            // The estimate's gate has widened while it predicted through
+            // the gated-out frames; a frame that carries on their sequence
+            // belongs to it, not to the estimate.
+            class = Measurement::GatedOut;
+        }
+        match class {
+            Measurement::Invalid => RuntimeStatus::MeasurementRejected,
+            Measurement::Accepted => {
+                self.gated_rejections = 0;
+                self.candidate_frames = 0;
+                self.confirmed_frames = self.confirmed_frames.saturating_add(1);
+                let m = NX / 2;
+                if !self.has_replaced && nis(&self.filters[..m], z, r) > REPLACED_TRACK_NIS {
+                    // A frame that pulls the estimate far (behind a gate
+                    // widened by long open-loop phases) may be the first of
+                    // a glitch: keep the estimate it pulls away from.
+                    self.replaced = self.filters;
+                    self.has_replaced = true;
+                }
+                update_filters(&mut self.filters[..m], z, r);
+                RuntimeStatus::Ok
+            }
+            Measurement::GatedOut => {
+                if self.has_replaced && nis(&self.replaced[..NX / 2], z, r) <= REPLACED_TRACK_NIS {
+                    // The frames are back on the track the last
+                    // re-acquisition replaced: that one was a glitch.
+                    self.filters = self.replaced;
+                    self.has_replaced = false;
+                    update_filters(&mut self.filters[..NX / 2], z, r);
+                    self.after_reacquisition();
+                    self.confirmed_frames = 1;
+                    return RuntimeStatus::Reacquired;
+                }
+                self.gated_rejections = self.gated_rejections.saturating_add(1);
+                self.track_candidate(z, r);
+                let after = self.settings.reacquire_after_rejections;
+                let needed = if self.confirmed_frames >= ESTABLISHED_AFTER_FRAMES {
+                    after.max(self.settings.glitch_frames.saturating_add(1))
+                } else {
+                    after
+                };
+                if after != 0 && self.candidate_frames >= needed {
+                    self.replaced = self.filters;
+                    self.has_replaced = true;
+                    self.filters = self.candidate;
+                    self.after_reacquisition();
+                    RuntimeStatus::Reacquired
+                } else {
+                    RuntimeStatus::MeasurementRejected
+                }
+            }
+        }
+    }
+
+    /// Whether frame `z` carries on the run of gated-out frames: the
+    /// candidate has seen at least two (so it knows their speed) and `z`
+    /// fits it better than the estimate.
+    fn continues_candidate(&self, z: &[f64], r: f64) -> bool {
+        let m = NX / 2;
+        self.candidate_frames >= 2
+            && within_gate(&self.candidate[..m], z, r)
+            && nis(&self.candidate[..m], z, r) < nis(&self.filters[..m], z, r)
+    }
+
+    /// Feeds a gated-out frame to the re-acquisition candidate: fused when
+    /// it agrees with the frames before it, else the candidate restarts at
+    /// it (position at the frame, speed zero with a wide uncertainty, so
+    /// that the next frame sets the speed).
+    fn track_candidate(&mut self, z: &[f64], r: f64) {
+        let m = NX / 2;
+        if self.candidate_frames > 0 && within_gate(&self.candidate[..m], z, r) {
+            update_filters(&mut self.candidate[..m], z, r);
+            self.candidate_frames += 1;
+        } else {
+            let std = self.settings.position_noise_m.max(1e-6);
+            for (c, &p) in self.candidate.iter_mut().zip(z) {
+                *c = CapsuleFilter::with_speed_std(p, std, REACQUIRE_SPEED_STD_M_PER_S);
+            }
+            self.candidate_frames = 1;
+        }
+    }
+
+    /// The estimate jumped (re-acquired): forget the counters and the plan.
+    fn after_reacquisition(&mut self) {
+        self.gated_rejections = 0;
+        self.candidate_frames = 0;
+        self.confirmed_frames = 0;
+        // A leg chosen from the old estimate means nothing now.
+        if self.has_target {
+            let x = self.estimate();
+            self.replan_legs(&x);
+        }
+        self.restart_plan();
     }
 
     /// Invalid when any position is non-finite or beyond
@@ -546,26 +837,36 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             return Measurement::Invalid;
         }
         let r = sq(self.settings.position_noise_m.max(1e-6));
-        let within_gate = z.iter().enumerate().all(|(i, &zi)| {
-            let f = &self.filters[i];
-            let innovation = zi - f.mean[0];
-            innovation * innovation / (f.cov[0] + r) <= MEASUREMENT_GATE_NIS
-        });
-        if within_gate {
+        if within_gate(&self.filters[..NX / 2], z, r) {
             Measurement::Accepted
         } else {
             Measurement::GatedOut
         }
     }
 
+    /// Predicts the estimate (and the re-acquisition candidate and the
+    /// replaced track, while they exist) over `duration_s` at gradient `u`.
     fn predict_filters(&mut self, u: f64, duration_s: f64) {
         let gamma = self.settings.disturbance_bound;
         // A disturbance of bound gamma, read as white noise over one sample.
         let accel_psd = (gamma * gamma * S::DT_S).max(MIN_ACCEL_PSD);
         let vel_psd = gamma * gamma * S::DT_S;
-        for i in 0..NX / 2 {
-            let (next, a) = S::capsule_transition(i, self.filters[i].mean, u, duration_s);
-            self.filters[i].predict(next, a, duration_s, accel_psd, vel_psd);
+        let predict = |filters: &mut [CapsuleFilter]| {
+            for (i, f) in filters.iter_mut().enumerate() {
+                let (next, a) = S::capsule_transition(i, f.mean, u, duration_s);
+                f.predict(next, a, duration_s, accel_psd, vel_psd);
+            }
+        };
+        let m = NX / 2;
+        predict(&mut self.filters[..m]);
+        if self.candidate_frames > 0 {
+            predict(&mut self.candidate[..m]);
+        }
+        if self.has_replaced {
+            predict(&mut self.replaced[..m]);
+            self.has_replaced = self.replaced[..m]
+                .iter()
+                .all(|f| f.position_std_m() <= REPLACED_TRACK_MAX_STD_M);
         }
     }
 
@@ -603,13 +904,18 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
             out.status = RuntimeStatus::Fallback;
             self.applied_samples = 0;
-            self.solver.reset();
-            // Outside the tables (e.g. a new target while moving fast):
-            // brake, and once nearly at rest head for the legs from here.
-            if (0..NX / 2).all(|i| libm::fabs(x[2 * i + 1]) <= REPLAN_SPEED_M_PER_S) {
-                self.replan_legs(x);
+            // No plan: the next cycle looks the (braked) state up again;
+            // once at rest (and only while frames agree with the
+            // estimate, which may be wrong), the legs are re-planned from
+            // here and reported as `Recovering` until the last one.
+            self.restart_plan();
+            if at_rest(x) && self.gated_rejections == 0 && self.replan_legs(x) {
+                self.recovering = !self.on_last_leg;
             }
             return out;
+        }
+        if self.recovering && out.status == RuntimeStatus::Ok {
+            out.status = RuntimeStatus::Recovering;
         }
         if report.status == SolveStatus::IterationLimit && out.status == RuntimeStatus::Ok {
             out.status = RuntimeStatus::IterationLimit;
@@ -712,7 +1018,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let w = HOLD_NATURAL_FREQUENCY_RAD_PER_S;
         let period_s = match self.settings.sampling {
             Sampling::Ideal => S::DT_S,
-            Sampling::Constant | Sampling::Variable => S::DT_S + self.settings.wait_s(),
+            Sampling::Constant | Sampling::Variable => S::DT_S + self.gap_s,
         };
         let accel = -(w * w * mean_x + 2.0 * w * mean_v) * period_s / S::DT_S;
         let bound = HOLD_MAX_GRADIENT_FRACTION * S::U_MAX_T_PER_M;
@@ -795,6 +1101,49 @@ enum Measurement {
     GatedOut,
 }
 
+/// Every capsule's speed within `REST_SPEED_M_PER_S`.
+fn at_rest<const NX: usize>(x: &[f64; NX]) -> bool {
+    (0..NX / 2).all(|i| libm::fabs(x[2 * i + 1]) <= REST_SPEED_M_PER_S)
+}
+
+/// `WrongLength("measured_positions_m")` unless a frame has M positions.
+fn check_frame_length<const NX: usize>(z: Option<&[f64]>) -> Result<(), RuntimeError> {
+    match z {
+        Some(z) if z.len() != NX / 2 => Err(RuntimeError::WrongLength("measured_positions_m")),
+        _ => Ok(()),
+    }
+}
+
+/// Whether every position of frame `z` is within the innovation gate
+/// (`MEASUREMENT_GATE_NIS`) of `filters` (measurement variance `r_m2`).
+fn within_gate(filters: &[CapsuleFilter], z: &[f64], r_m2: f64) -> bool {
+    filters.iter().zip(z).all(|(f, &zi)| {
+        let innovation = zi - f.mean[0];
+        innovation * innovation / (f.cov[0] + r_m2) <= MEASUREMENT_GATE_NIS
+    })
+}
+
+/// Normalized innovation squared of frame `z` against `filters`, summed
+/// over the capsules.
+fn nis(filters: &[CapsuleFilter], z: &[f64], r_m2: f64) -> f64 {
+    filters
+        .iter()
+        .zip(z)
+        .map(|(f, &zi)| sq(zi - f.mean[0]) / (f.cov[0] + r_m2))
+        .sum()
+}
+
+/// Measurement update of every capsule's filter with frame `z`.
+fn update_filters(filters: &mut [CapsuleFilter], z: &[f64], r_m2: f64) {
+    for (f, &zi) in filters.iter_mut().zip(z) {
+        f.update(zi, r_m2);
+        // Behind a wide gate (a fresh candidate, or a large disturbance
+        // bound) one frame can imply any speed; beyond the physical range
+        // the model's prediction overflows to NaN.
+        f.mean[1] = f.mean[1].clamp(-MAX_ABS_SPEED_M_PER_S, MAX_ABS_SPEED_M_PER_S);
+    }
+}
+
 /// A one-sample plan (rest zero) for single-step prediction.
 fn single<const K: usize>(u: f64) -> [f64; K] {
     let mut p = [0.0; K];
@@ -804,17 +1153,82 @@ fn single<const K: usize>(u: f64) -> [f64; K] {
     p
 }
 
-/// Fallback outside the tables: brake the mean speed within one sample,
-/// bounded by u_max (drag brakes further). Never extrapolates a table.
+/// Fallback outside the tables: one braking sample, bounded by u_max,
+/// never an extrapolated table value. One gradient changes every capsule's
+/// speed alike, so braking the mean speed can leave the capsules moving
+/// apart (e.g. 86 and 231 mm/s braked on the mean: -72 and +73 mm/s), and a
+/// low-drag capsule then coasts far (drag ~ v^2: 73 mm/s coasts 12 cm in
+/// 5 s for the large default capsule). The law minimizes instead the
+/// distance the capsules would coast after this sample,
+/// sum_i ln(1 + b_i |v_i'| T) / b_i over `BRAKING_HORIZON_S` with b_i
+/// measured from the model: that sum is concave in each |v_i'|, so its
+/// minimum over the gradient lies where one capsule stops or at +-u_max.
+/// At rest (every speed within `REST_SPEED_M_PER_S`) it is zero.
 pub fn braking_gradient<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     x: &[f64; NX],
 ) -> f64 {
-    let (_, mean_v) = capsule_means(x);
-    let mean_g = mean_gradient_gain::<S, NX, K>();
-    if mean_g.is_nan() || mean_g <= 0.0 || !mean_v.is_finite() {
+    let m = NX / 2;
+    if at_rest(x) {
         return 0.0;
     }
-    (-mean_v / (mean_g * S::DT_S)).clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M)
+    let u_max = S::U_MAX_T_PER_M;
+    // Speed change per unit gradient over one sample, and drag per capsule.
+    let mut gain = [0.0; K2];
+    let mut drag = [0.0; K2];
+    for i in 0..m {
+        (gain[i], drag[i]) = capsule_gain_and_drag::<S, NX, K>(i);
+        if gain[i].is_nan() || gain[i] <= 0.0 || !x[2 * i + 1].is_finite() {
+            return 0.0;
+        }
+    }
+    let coast_m = |u: f64| -> f64 {
+        let mut d = 0.0;
+        for i in 0..m {
+            let v = libm::fabs(x[2 * i + 1] + gain[i] * u);
+            d += if drag[i] > 0.0 {
+                libm::log1p(drag[i] * v * BRAKING_HORIZON_S) / drag[i]
+            } else {
+                v * BRAKING_HORIZON_S
+            };
+        }
+        d
+    };
+    let mut best_u = 0.0;
+    let mut best = coast_m(0.0);
+    let mut consider = |u: f64| {
+        let u = u.clamp(-u_max, u_max);
+        let d = coast_m(u);
+        if d < best {
+            best = d;
+            best_u = u;
+        }
+    };
+    consider(-u_max);
+    consider(u_max);
+    for i in 0..m {
+        consider(-x[2 * i + 1] / gain[i]);
+    }
+    best_u
+}
+
+/// (speed change per unit gradient over one sample at rest, (m/s)/(T/m);
+/// drag coefficient b_i, 1/m) of capsule `i`, from one-sample predictions
+/// of the model (no second copy of g_i or b_i).
+fn capsule_gain_and_drag<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    i: usize,
+) -> (f64, f64) {
+    let du = 1.0e-3;
+    let (pushed, _) = S::capsule_transition(i, [0.0, 0.0], du, S::DT_S);
+    let gain = pushed[1] / du;
+    // Coasting from v0: v' = -b v^2 gives 1/v(T) - 1/v0 = b T.
+    let v0 = 0.1;
+    let (coasted, _) = S::capsule_transition(i, [0.0, v0], 0.0, S::DT_S);
+    let drag = if coasted[1] > 0.0 {
+        (1.0 / coasted[1] - 1.0 / v0) / S::DT_S
+    } else {
+        0.0
+    };
+    (gain, drag.max(0.0))
 }
 
 /// Near rest one gradient moves every capsule alike: the motion relative to

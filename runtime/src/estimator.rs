@@ -14,10 +14,11 @@ pub struct CapsuleFilter {
 /// start at rest, but the estimator must not be certain of it.
 pub const INITIAL_SPEED_STD_M_PER_S: f64 = 0.01;
 
-/// Speed uncertainty (standard deviation) after re-acquisition, m/s: the
-/// capsules may be moving at up to their terminal speed at u_max (0.64 m/s
-/// for the faster default capsule). Wide, so that the next frame passes the
-/// gate wherever the capsules went and its update sets the speeds.
+/// Speed uncertainty (standard deviation) of a re-acquisition candidate at
+/// its first frame, m/s: the capsules may be moving at up to their terminal
+/// speed at u_max (0.64 m/s for the faster default capsule). Wide, so that
+/// the next frame passes the candidate's gate wherever the capsules went
+/// and its update sets the speeds.
 pub const REACQUIRE_SPEED_STD_M_PER_S: f64 = 0.5;
 
 impl CapsuleFilter {

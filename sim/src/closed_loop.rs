@@ -360,10 +360,9 @@ fn explain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
             if excess_m < 0.0 { "below" } else { "above" },
             if excess_m < 0.0 { "lower" } else { "upper" },
         ),
-        E::TargetSpeedNotZero { capsule } => anyhow::anyhow!(
-            "target speed of capsule {} is {} m/s; targets are rest states (speed 0)",
-            capsule + 1,
-            x.get(2 * capsule + 1).copied().unwrap_or(f64::NAN)
+        E::TargetNotAtRest => anyhow::anyhow!(
+            "target speeds {:?} m/s are not 0; targets are rest states",
+            x.iter().skip(1).step_by(2).collect::<Vec<_>>()
         ),
         E::TargetOutOfRange => anyhow::anyhow!(
             "no chain of stored plans reaches it from the current state (the state lies outside the workspace the tables were made for)"

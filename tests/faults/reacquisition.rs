@@ -126,36 +126,44 @@ fn a_wrong_reset_is_reacquired_and_the_loop_settles() {
     }
 }
 
-/// Re-acquisition restarts the estimate at the frame's positions with the
-/// speeds zero and a wide speed uncertainty, and resets the gate counter.
+/// Re-acquisition restarts the estimate from the frames: the capsules move
+/// (5 and -8 cm/s from the origin), the estimate is reset at rest 3 and 4
+/// cm away (inside the tables relative to A, so the plan is not the
+/// fallback). The gated-out frames agree with one another, and the
+/// REACQUIRE_AFTER_REJECTIONS-th re-acquires with their positions and the
+/// speeds they show, not "at rest"; the counters restart.
 #[test]
-fn reacquisition_restarts_the_estimate_at_the_frame() {
+fn reacquisition_takes_positions_and_speeds_from_the_frames() {
     let mut c = controller(Sampling::Constant, &A);
-    // The capsules are at the origin; the estimate is told 3 and 4 cm
-    // (inside the tables relative to A, so the plan is not the fallback).
     c.reset(&[0.03, 0.04]).unwrap();
-    let truth = [0.0; M];
-    for _ in 1..REACQUIRE_AFTER_REJECTIONS {
-        let out = c.cycle(Some(&truth)).unwrap();
-        assert_eq!(out.status, RuntimeStatus::MeasurementRejected);
-        assert_safe(&out, "before re-acquisition");
+    let wait = wait_s(&c);
+    let mut truth = [0.0, 0.05, 0.0, -0.08];
+    for k in 1..=REACQUIRE_AFTER_REJECTIONS {
+        let out = c.cycle(Some(&[truth[0], truth[2]])).unwrap();
+        assert_safe(&out, "re-acquisition");
+        truth = predicted(&truth, 0.0, wait);
+        if k < REACQUIRE_AFTER_REJECTIONS {
+            assert_eq!(out.status, RuntimeStatus::MeasurementRejected, "{k}");
+        } else {
+            assert_eq!(out.status, RuntimeStatus::Reacquired);
+            // The actuation start: the truth there, speeds included.
+            for j in 0..NX {
+                assert!(
+                    (out.estimate[j] - truth[j]).abs() < 1e-3,
+                    "{j}: {:?} vs {truth:?}",
+                    &out.estimate[..NX]
+                );
+            }
+            // Not "at rest": the large capsule still moves at ~7 cm/s.
+            assert!(truth[3] < -0.05, "{truth:?}");
+            assert!(out.solve.is_some_and(|r| r.took_table_plan));
+        }
+        for &u in &out.gradients_t_per_m[..out.actuation_samples] {
+            truth = predicted(&truth, u, spec::DT_S);
+        }
     }
-    let out = c.cycle(Some(&truth)).unwrap();
-    assert_eq!(out.status, RuntimeStatus::Reacquired);
-    assert_safe(&out, "re-acquisition");
-    // At rest at the frame through tracking + delay (u = 0, v = 0): the
-    // actuation start is the frame itself.
-    assert_eq!(&out.estimate[..NX], &[0.0; NX][..]);
-    // Far wider than after a reset at rest (the capsules may be moving).
-    for i in 0..M {
-        let f = c.filter(i).unwrap();
-        assert!(
-            f.speed_std_m_per_s() > 10.0 * INITIAL_SPEED_STD_M_PER_S,
-            "capsule {i}: speed std {} m/s",
-            f.speed_std_m_per_s()
-        );
-    }
-    // The counter restarted: the next frames are gated normally.
+    // The counters restarted: the next frame is fused, isolated outliers
+    // are rejected again.
     let out = c.cycle(Some(&expected_frame(&c))).unwrap();
     assert_eq!(out.status, RuntimeStatus::Ok);
     for _ in 1..REACQUIRE_AFTER_REJECTIONS {
