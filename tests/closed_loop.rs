@@ -83,7 +83,8 @@ fn target_outside_the_workspace_is_a_clear_error() {
         DisturbanceLevel::None,
         1,
     );
-    let err = run(&config, &opts).unwrap_err().to_string();
+    // The whole chain ("target ... m: capsule ..."), as the CLI prints it.
+    let err = format!("{:#}", run(&config, &opts).unwrap_err());
     // Names the capsule, the bound and by how much.
     assert!(
         err.contains("capsule 1 at 0.2 m is outside the workspace"),

@@ -484,13 +484,25 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         Ok(())
     }
 
-    /// The next leg from the capsules' positions in `x` to `target`.
+    /// The next leg from the capsules' positions in `x` to `target`. A
+    /// displacement beyond the chain table (the state outside the
+    /// workspace, e.g. after a fault) is clamped to it: the first leg of
+    /// the clamped displacement still moves every capsule toward its
+    /// target and no farther, and is never the last.
     fn leg_from(x: &[f64; NX], target: &[f64; NX]) -> Option<Leg<NX>> {
+        let span_m = S::WORKSPACE_MAX_M - S::WORKSPACE_MIN_M;
         let mut d = [0.0; NX];
+        let mut clamped = false;
         for i in 0..NX / 2 {
-            d[2 * i] = x[2 * i] - target[2 * i];
+            let raw = x[2 * i] - target[2 * i];
+            d[2 * i] = raw.clamp(-span_m, span_m);
+            clamped |= d[2 * i] != raw;
         }
-        S::first_leg(&d)
+        let mut leg = S::first_leg(&d)?;
+        if clamped {
+            leg.last = false;
+        }
+        Some(leg)
     }
 
     /// Heads for the end of `leg`, starting from `x`.
