@@ -114,6 +114,19 @@ pub mod tables {
     /// Minimum rest-to-rest time of each plan into the settle band
     /// (1 mm, 5 mm/s), s; infinite where not reached.
     pub static PLAN_MIN_TIME_S: [f64; PLAN_COUNT] = [];
+    /// Fine grid of small moves from rest near the target (the end
+    /// game): relative positions, m.
+    pub const FINE_AXIS: Axis = Axis {
+        start: 0.0,
+        step: 1.0,
+        count: 1usize,
+    };
+    pub const FINE_COUNT: usize = 0usize;
+    /// Fine plans back to back and with the coast, T/m.
+    pub static FINE_PLAN_U: [[f64; K]; FINE_COUNT] = [];
+    pub static COASTED_FINE_PLAN_U: [[f64; K]; FINE_COUNT] = [];
+    /// Whether both fine plans of a grid point move (the centre's do not).
+    pub static FINE_REACHED: [bool; FINE_COUNT] = [];
     /// Lattice of each capsule's displacement x_start - x_target, m.
     pub const LEG_AXIS: Axis = Axis {
         start: 0.0,
@@ -325,7 +338,15 @@ pub mod solver {
                 f64::INFINITY
             };
             if USE_TABLES {
-                match lookup_tail_for(e, &mut self.candidate, self.schedule.coasted()) {
+                let coasted = self.schedule.coasted();
+                let fine = !self.has_plan
+                    && lookup_fine(e, &mut self.candidate, coasted).is_some();
+                let found = if fine {
+                    Some(())
+                } else {
+                    lookup_tail_for(e, &mut self.candidate, coasted)
+                };
+                match found {
                     Some(()) => {
                         let c = rollout_cost_below(
                             e,
@@ -780,6 +801,30 @@ pub mod solver {
             Some(c) if c < QP_ITERATION_MAP.len() => QP_ITERATION_MAP[c] as u32,
             _ => 0,
         }
+    }
+    /// Speed below which a state counts as at rest for the fine plans, m/s.
+    pub const FINE_REST_SPEED_M_PER_S: f64 = 5.0e-3;
+    /// Fills `out` with the fine plan from rest nearest relative state `e`
+    /// (every speed below `FINE_REST_SPEED_M_PER_S`, every position on the fine
+    /// grid); None otherwise.
+    pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
+        if FINE_COUNT == 0 {
+            return None;
+        }
+        let mut flat = 0usize;
+        let mut i = 0;
+        while i < M {
+            if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S) {
+                return None;
+            }
+            flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, e[2 * i])?;
+            i += 1;
+        }
+        if flat >= FINE_COUNT || !FINE_REACHED[flat] {
+            return None;
+        }
+        *out = if coasted { COASTED_FINE_PLAN_U[flat] } else { FINE_PLAN_U[flat] };
+        Some(())
     }
     /// The leg lattice cell of displacement `d = x_start - x_target` (positions;
     /// speeds ignored); None outside the lattice.

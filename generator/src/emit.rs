@@ -299,6 +299,31 @@ fn emit_tables(
         None => (Vec::new(), vec![crate::legs::NO_LEG], vec![float_inf()]),
     };
     let leg_cells = first_legs.len();
+    let fine_axis = tables.map_or(empty_axis_for_legs(), |t| t.fine.axis.clone());
+    let fine_axis_t = axis_tokens("fine.axis", &fine_axis)?;
+    let plan_rows_of = |name: &str, plans: &[Vec<f64>]| -> Result<Vec<TokenStream>, EmitError> {
+        plans
+            .iter()
+            .map(|u| {
+                let us = floats(name, u)?;
+                Ok(quote! { [#(#us),*] })
+            })
+            .collect()
+    };
+    let (fine_rows, coasted_fine_rows, fine_reached) = match tables {
+        Some(t) => (
+            plan_rows_of("fine plan u", &t.fine.plans)?,
+            plan_rows_of("coasted fine plan u", &t.fine.coasted_plans)?,
+            t.fine
+                .plans
+                .iter()
+                .zip(&t.fine.coasted_plans)
+                .map(|(a, b)| a.iter().any(|v| *v != 0.0) && b.iter().any(|v| *v != 0.0))
+                .collect::<Vec<bool>>(),
+        ),
+        None => (Vec::new(), Vec::new(), Vec::new()),
+    };
+    let fine_count = fine_rows.len();
     let (coast_s, coasted_rows, coasted_index) = match tables {
         Some(t) => (
             float("coasted.coast_s", t.coasted.coast_s)?,
@@ -343,7 +368,10 @@ fn emit_tables(
     let cells = index.len();
     let expected_cells = pos_axis.count.pow(m as u32) * spd_axis.count.pow(m as u32);
     debug_assert_eq!(cells, expected_cells.max(1));
-    let table_bytes = 2 * (plan_count * k * 8 + cells * 4) + plan_count * 9 + leg_cells * 10;
+    let table_bytes = 2 * (plan_count * k * 8 + cells * 4 + fine_count * k * 8)
+        + plan_count * 9
+        + fine_count
+        + leg_cells * 10;
     let plan_count_ident = format_ident!("PLAN_COUNT");
     Ok(quote! {
         /// Offline tables: plans from rest over the relative-position grid and
@@ -369,6 +397,15 @@ fn emit_tables(
             /// Minimum rest-to-rest time of each plan into the settle band
             /// (1 mm, 5 mm/s), s; infinite where not reached.
             pub static PLAN_MIN_TIME_S: [f64; PLAN_COUNT] = [#(#min_times),*];
+            /// Fine grid of small moves from rest near the target (the end
+            /// game): relative positions, m.
+            pub const FINE_AXIS: Axis = #fine_axis_t;
+            pub const FINE_COUNT: usize = #fine_count;
+            /// Fine plans back to back and with the coast, T/m.
+            pub static FINE_PLAN_U: [[f64; K]; FINE_COUNT] = [#(#fine_rows),*];
+            pub static COASTED_FINE_PLAN_U: [[f64; K]; FINE_COUNT] = [#(#coasted_fine_rows),*];
+            /// Whether both fine plans of a grid point move (the centre's do not).
+            pub static FINE_REACHED: [bool; FINE_COUNT] = [#(#fine_reached),*];
             /// Lattice of each capsule's displacement x_start - x_target, m.
             pub const LEG_AXIS: Axis = #leg_axis_t;
             /// Per lattice displacement: the plan of the first leg of the

@@ -37,6 +37,20 @@ pub const PLAN_BAND: Band = Band {
     speed_m_per_s: 1.5e-3,
 };
 
+/// The band the fine plans (moves of a few mm near the target, see
+/// `FINE_RANGE_M`) end in: a tenth of the settle band's position.
+pub const FINE_PLAN_BAND: Band = Band {
+    position_m: 0.1e-3,
+    speed_m_per_s: 0.5e-3,
+};
+
+/// Half-width of the fine grid of small moves from rest, m: it covers the
+/// main grid's half cell (the 5 mm grid's nearest plan to an error of
+/// 1-2.5 mm is the empty one), so that the end game has plans too.
+pub const FINE_RANGE_M: f64 = 3.0e-3;
+/// Spacing of the fine grid, m.
+pub const FINE_STEP_M: f64 = 0.5e-3;
+
 /// Input weight of the feasibility problem, per (T/m)^2: a regularizer only
 /// (at u_max it costs 1.6e-6 per sample against 1 at the band's edge).
 const REACH_INPUT_WEIGHT: f64 = 1.0e-3;
@@ -194,6 +208,7 @@ pub fn first_arriving(
 pub fn grid_min_time_plans(
     base: &Ocp,
     axis: &Axis,
+    band: &Band,
     max_samples: usize,
     random_starts: usize,
     sqp_iterations: usize,
@@ -279,9 +294,8 @@ pub fn grid_min_time_plans(
                         }
                     }
                 }
-                let found =
-                    first_arriving(base, &e0, &guesses, &PLAN_BAND, max_samples, sqp_iterations)
-                        .map(|start| descend(base, &e0, start, &PLAN_BAND, sqp_iterations));
+                let found = first_arriving(base, &e0, &guesses, band, max_samples, sqp_iterations)
+                    .map(|start| descend(base, &e0, start, band, sqp_iterations));
                 progress.tick();
                 (flat, found)
             })
@@ -320,11 +334,11 @@ pub fn grid_min_time_plans(
                 base,
                 &e0_of(flat),
                 &guesses,
-                &PLAN_BAND,
+                band,
                 max_samples,
                 sqp_iterations,
             )
-            .map(|start| descend(base, &e0_of(flat), start, &PLAN_BAND, sqp_iterations))
+            .map(|start| descend(base, &e0_of(flat), start, band, sqp_iterations))
             .filter(|b| b.samples < own);
             progress.tick();
             (flat, found)

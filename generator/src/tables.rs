@@ -10,7 +10,10 @@
 
 use crate::config::Config;
 use crate::legs::{build_leg_table, LegTable};
-use crate::mintime::{arrival_sample, finish_at_rest, grid_min_time_plans, SETTLE_BAND};
+use crate::mintime::{
+    arrival_sample, finish_at_rest, grid_min_time_plans, Band, FINE_PLAN_BAND, FINE_RANGE_M,
+    FINE_STEP_M, PLAN_BAND, SETTLE_BAND,
+};
 use crate::model::Model;
 use crate::ocp::{Ocp, Plan};
 use rand::{Rng, SeedableRng};
@@ -130,6 +133,22 @@ pub struct Tables {
     pub legs: LegTable,
     /// Plans and index for constant sampling (a coast after every sample).
     pub coasted: CoastedTables,
+    /// Small moves from rest near the target (the end game).
+    pub fine: FineTables,
+}
+
+/// Minimum-time plans from rest over a fine grid of small relative
+/// positions (`FINE_RANGE_M`, `FINE_STEP_M`), for both schedules: the main
+/// grid's nearest plan to a rest state 1-2.5 mm off is the empty one, and
+/// the local refinement cannot separate capsules at rest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FineTables {
+    pub axis: Axis,
+    /// Gradients per plan (row-major over the M axes), padded to the plan
+    /// length, back to back.
+    pub plans: Vec<Vec<f64>>,
+    /// The same for one sample per phase followed by the coast.
+    pub coasted_plans: Vec<Vec<f64>>,
 }
 
 /// Tables for one sample per actuation phase followed by a zero-gradient
@@ -313,7 +332,7 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
         let idx = unflatten(flat, &dims);
         idx.iter().flat_map(|&i| [axis.value(i), 0.0]).collect()
     };
-    let plans = schedule_plans(&ocp, &axis, &e0_of, grid, progress);
+    let plans = schedule_plans(&ocp, &axis, &PLAN_BAND, &e0_of, grid, progress);
     // Constant sampling plays one sample, then tracks (u = 0) for the
     // tracking time + delay: back-to-back plans, played that way, miss
     // their targets by centimetres, so that schedule has plans of its own.
@@ -322,7 +341,38 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
         coast_s,
         ..ocp.clone()
     };
-    let coasted_plans = schedule_plans(&coasted_ocp, &axis, &e0_of, grid, progress);
+    let coasted_plans = schedule_plans(&coasted_ocp, &axis, &PLAN_BAND, &e0_of, grid, progress);
+    // The end game: small moves from rest on a fine grid around the target.
+    let fine_axis = Axis::symmetric(FINE_RANGE_M, FINE_STEP_M);
+    let fine_dims = vec![fine_axis.count; m];
+    let fine_e0_of = |flat: usize| -> Vec<f64> {
+        unflatten(flat, &fine_dims)
+            .iter()
+            .flat_map(|&i| [fine_axis.value(i), 0.0])
+            .collect()
+    };
+    let inputs = |entries: Vec<PlanEntry>| -> Vec<Vec<f64>> {
+        entries.into_iter().map(|p| p.plan.u).collect()
+    };
+    let fine = FineTables {
+        plans: inputs(schedule_plans(
+            &ocp,
+            &fine_axis,
+            &FINE_PLAN_BAND,
+            &fine_e0_of,
+            grid,
+            progress,
+        )),
+        coasted_plans: inputs(schedule_plans(
+            &coasted_ocp,
+            &fine_axis,
+            &FINE_PLAN_BAND,
+            &fine_e0_of,
+            grid,
+            progress,
+        )),
+        axis: fine_axis,
+    };
 
     let legs = build_leg_table(&axis, &plans, m, config.workspace.span_m());
     let index_position_axis = Axis::symmetric(
@@ -364,6 +414,7 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
             plans: coasted_plans,
             index: coasted_index,
         },
+        fine,
     }
 }
 
@@ -373,13 +424,21 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
 fn schedule_plans(
     ocp: &Ocp,
     axis: &Axis,
+    band: &Band,
     e0_of: &(dyn Fn(usize) -> Vec<f64> + Sync),
     grid: &crate::config::GridConfig,
     progress: &dyn Progress,
 ) -> Vec<PlanEntry> {
     let steps = ocp.steps;
-    let min_time =
-        grid_min_time_plans(ocp, axis, steps, grid.starts, grid.sqp_iterations, progress);
+    let min_time = grid_min_time_plans(
+        ocp,
+        axis,
+        band,
+        steps,
+        grid.starts,
+        grid.sqp_iterations,
+        progress,
+    );
     // Wall time per plan sample: the sample and the coast after it.
     let sample_period_s = ocp.dt_s + ocp.coast_s;
     min_time
@@ -595,6 +654,11 @@ mod tests {
                 plans: Vec::new(),
                 index: vec![(u16::MAX, 0)],
             },
+            fine: FineTables {
+                axis: Axis::symmetric(0.001, 0.001),
+                plans: Vec::new(),
+                coasted_plans: Vec::new(),
+            },
         }
     }
 
@@ -678,7 +742,7 @@ mod tests {
                 err,
                 TableError::Version {
                     found: 1,
-                    expected: 2
+                    expected: 3
                 }
             ),
             "{err}"

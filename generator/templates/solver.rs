@@ -201,7 +201,16 @@ impl Solver {
             f64::INFINITY
         };
         if USE_TABLES {
-            match lookup_tail_for(e, &mut self.candidate, self.schedule.coasted()) {
+            let coasted = self.schedule.coasted();
+            // Without a plan, at rest near the target: a fine plan (the
+            // main grid's nearest one would be empty).
+            let fine = !self.has_plan && lookup_fine(e, &mut self.candidate, coasted).is_some();
+            let found = if fine {
+                Some(())
+            } else {
+                lookup_tail_for(e, &mut self.candidate, coasted)
+            };
+            match found {
                 Some(()) => {
                     let c = rollout_cost_below(e, &self.candidate, &self.schedule, cost);
                     if c < cost {
@@ -672,6 +681,36 @@ pub fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
         Some(c) if c < QP_ITERATION_MAP.len() => QP_ITERATION_MAP[c] as u32,
         _ => 0,
     }
+}
+
+/// Speed below which a state counts as at rest for the fine plans, m/s.
+pub const FINE_REST_SPEED_M_PER_S: f64 = 5.0e-3;
+
+/// Fills `out` with the fine plan from rest nearest relative state `e`
+/// (every speed below `FINE_REST_SPEED_M_PER_S`, every position on the fine
+/// grid); None otherwise.
+pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
+    if FINE_COUNT == 0 {
+        return None;
+    }
+    let mut flat = 0usize;
+    let mut i = 0;
+    while i < M {
+        if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S) {
+            return None;
+        }
+        flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, e[2 * i])?;
+        i += 1;
+    }
+    if flat >= FINE_COUNT || !FINE_REACHED[flat] {
+        return None;
+    }
+    *out = if coasted {
+        COASTED_FINE_PLAN_U[flat]
+    } else {
+        FINE_PLAN_U[flat]
+    };
+    Some(())
 }
 
 /// The leg lattice cell of displacement `d = x_start - x_target` (positions;

@@ -169,6 +169,9 @@ pub const REPLACED_TRACK_NIS: f64 = 9.0;
 pub const WAYPOINT_POSITION_M: f64 = 2.0e-3;
 /// ... and every speed below this, m/s.
 pub const WAYPOINT_SPEED_M_PER_S: f64 = 20.0e-3;
+/// Speed below which the end game restarts from a fine stored plan, m/s
+/// (the settle tolerance).
+pub const END_GAME_REST_SPEED_M_PER_S: f64 = 5.0e-3;
 /// Braking outside the tables re-plans the legs once every speed is below
 /// this, m/s (the stored plans start at rest).
 pub const REPLAN_SPEED_M_PER_S: f64 = 20.0e-3;
@@ -988,12 +991,16 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         report
     }
 
-    /// Every speed below `REPLAN_SPEED_M_PER_S` while some position error
-    /// exceeds `WAYPOINT_POSITION_M`.
+    /// Nearly at rest away from the target, where a stored plan from here
+    /// beats refining: every speed below `REPLAN_SPEED_M_PER_S` with some
+    /// position error beyond `WAYPOINT_POSITION_M` (main grid), or every
+    /// speed below the settle tolerance with some error beyond the hold's
+    /// entry (the fine grid of the end game).
     fn creeping(&self, e: &[f64; NX]) -> bool {
-        let slow = (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= REPLAN_SPEED_M_PER_S);
-        let away = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > WAYPOINT_POSITION_M);
-        slow && away
+        let below = |speed: f64| (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= speed);
+        let beyond = |position: f64| (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > position);
+        (below(REPLAN_SPEED_M_PER_S) && beyond(WAYPOINT_POSITION_M))
+            || (below(END_GAME_REST_SPEED_M_PER_S) && beyond(self.settings.hold_enter_position_m))
     }
 
     /// Enters or leaves the terminal hold (with hysteresis); true inside.
