@@ -111,8 +111,7 @@ struct Outcome {
 impl Outcome {
     /// Settle time minus the deadline, s (infinite when never settled).
     fn excess_s(&self) -> f64 {
-        self.settle_s
-            .map_or(f64::INFINITY, |t| t - self.deadline_s)
+        self.settle_s.map_or(f64::INFINITY, |t| t - self.deadline_s)
     }
 
     fn row(&self) -> String {
@@ -414,10 +413,16 @@ fn measured_worst_settling_where_the_issue_thresholds_fail() {
     assert!(settle <= 2.3, "variable, short moves: worst {settle} s");
     let (_, excess, never) = worst(Sampling::Constant, true);
     assert_eq!(never, 0);
-    assert!(excess <= 1.5, "constant, far moves: worst excess {excess} s");
+    assert!(
+        excess <= 1.5,
+        "constant, far moves: worst excess {excess} s"
+    );
     let (_, excess, never) = worst(Sampling::Variable, true);
     assert!(never <= 2, "variable, far moves: {never} never settled");
-    assert!(excess <= 1.3, "variable, far moves: worst excess {excess} s");
+    assert!(
+        excess <= 1.3,
+        "variable, far moves: worst excess {excess} s"
+    );
 }
 
 /// Station keeping from the first entry into the band, for at least 10 s
@@ -433,7 +438,12 @@ fn measured_station_keeping_over_10_s() {
     let outcomes = run_grid(&moves, &SEEDS, 12.0);
     let miss = |o: &Outcome| 1.0 - o.metrics.time_in_band_after_entry.unwrap_or(0.0);
     print_summary(&outcomes);
-    print_worst("station keeping (1 - in-band fraction)", &outcomes, miss, 10);
+    print_worst(
+        "station keeping (1 - in-band fraction)",
+        &outcomes,
+        miss,
+        10,
+    );
     for o in &outcomes {
         let entry = o.metrics.first_in_band_s.expect("enters the band");
         assert!(o.duration_s - entry >= 10.0, "{}", o.row());

@@ -249,7 +249,10 @@ mod tests {
             row(0.1, 0.0, 0.0, 0.0, Phase::Track),
         ];
         let m = Metrics::compute(&far, &TARGET, 0.1, 0.5, 0).unwrap();
-        assert_eq!((m.first_in_band_s, m.time_in_band_after_entry), (None, None));
+        assert_eq!(
+            (m.first_in_band_s, m.time_in_band_after_entry),
+            (None, None)
+        );
     }
 
     #[test]
@@ -307,10 +310,15 @@ mod tests {
             "duty_cycle_until_settled",
             "state_bound_violations",
             "max_step_compute_ns",
+            "min_time_bound_s",
+            "settle_over_bound",
+            "workspace_excursion_m",
+            "first_in_band_s",
+            "time_in_band_after_entry",
         ] {
             assert!(keys.contains(&k), "{k}");
         }
-        assert_eq!(keys.len(), 7);
+        assert_eq!(keys.len(), 12);
     }
 
     #[test]

@@ -118,9 +118,9 @@ pub fn disturbance_kind_from_name(name: &str) -> Result<DisturbanceKind> {
         "random" => Ok(DisturbanceKind::Random),
         "drift" => Ok(DisturbanceKind::Drift),
         "constant" => Ok(DisturbanceKind::Constant),
-        other => bail!(
-            "unknown disturbance model `{other}` (expected random, drift, constant or none)"
-        ),
+        other => {
+            bail!("unknown disturbance model `{other}` (expected random, drift, constant or none)")
+        }
     }
 }
 
@@ -213,7 +213,10 @@ impl Disturbance {
             // Each component lies in [-1, 1]; the vector is pulled back onto
             // the unit ball when it leaves it, then scaled by the bound.
             for (c, terms) in self.current.iter_mut().zip(&self.drift) {
-                *c = terms.iter().map(|(w, om, ph)| w * (om * t_s + ph).sin()).sum();
+                *c = terms
+                    .iter()
+                    .map(|(w, om, ph)| w * (om * t_s + ph).sin())
+                    .sum();
             }
             let norm = self.current.iter().map(|e| e * e).sum::<f64>().sqrt();
             let scale = self.bound_si / norm.max(1.0);
@@ -558,7 +561,10 @@ mod tests {
         };
         let r = run(7);
         assert_eq!(r, run(7));
-        assert_ne!(r.iter().map(|x| x.d.clone()).collect::<Vec<_>>(), run(8).iter().map(|x| x.d.clone()).collect::<Vec<_>>());
+        assert_ne!(
+            r.iter().map(|x| x.d.clone()).collect::<Vec<_>>(),
+            run(8).iter().map(|x| x.d.clone()).collect::<Vec<_>>()
+        );
         let norms: Vec<f64> = r
             .iter()
             .map(|x| x.d.iter().map(|e| e * e).sum::<f64>().sqrt())
