@@ -77,17 +77,17 @@ const HELD_S: f64 = 1.0;
 /// The first row time from which every position stays within 1 mm and every
 /// speed below 5 mm/s for `held_s` (None: never within the run).
 fn settled_and_held_s(t: &[f64], x: &[Vec<f64>], target: &[f64], held_s: f64) -> Option<f64> {
-    let inside = |k: usize| {
-        x[k].chunks_exact(2)
+    let inside = |xk: &[f64]| {
+        xk.chunks_exact(2)
             .zip(target.chunks_exact(2))
             .all(|(xv, tv)| (xv[0] - tv[0]).abs() <= 1e-3 && xv[1].abs() < 5e-3)
     };
     let end = *t.last()?;
     let mut since: Option<f64> = None;
-    for k in 0..t.len() {
-        if inside(k) {
-            let s = *since.get_or_insert(t[k]);
-            if t[k] - s >= held_s - 1e-9 {
+    for (&tk, xk) in t.iter().zip(x) {
+        if inside(xk) {
+            let s = *since.get_or_insert(tk);
+            if tk - s >= held_s - 1e-9 {
                 return Some(s);
             }
         } else {
