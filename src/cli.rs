@@ -2,7 +2,7 @@
 //! modules implementing each subcommand can take them without clap plumbing.
 
 use anyhow::{bail, Result};
-use capsule_mpc_generator::config::{Config, ConfigError};
+use capsule_mpc_generator::config::{Config, ConfigError, DisturbanceKind};
 use capsule_mpc_sim::closed_loop::{Preset, Sampling, Scenario};
 use capsule_mpc_sim::plant::DisturbanceLevel;
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -107,6 +107,28 @@ impl From<DisturbanceArg> for DisturbanceLevel {
     }
 }
 
+/// Disturbance model on the command line: how a disturbance of the
+/// `--disturbance` size varies in time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DisturbanceModelArg {
+    /// Piecewise constant, redrawn every 20 ms, uniform in the ball.
+    Random,
+    /// Slowly varying: sums of sinusoids with periods of 1-5 s.
+    Drift,
+    /// A constant bias of norm equal to the bound.
+    Constant,
+}
+
+impl From<DisturbanceModelArg> for DisturbanceKind {
+    fn from(d: DisturbanceModelArg) -> Self {
+        match d {
+            DisturbanceModelArg::Random => DisturbanceKind::Random,
+            DisturbanceModelArg::Drift => DisturbanceKind::Drift,
+            DisturbanceModelArg::Constant => DisturbanceKind::Constant,
+        }
+    }
+}
+
 /// Generated controller on the command line (see [`Preset`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum PresetArg {
@@ -154,6 +176,9 @@ pub struct SimulateArgs {
     pub sampling: SamplingArg,
     #[arg(long, value_enum, default_value = "paper")]
     pub disturbance: DisturbanceArg,
+    /// How the disturbance varies in time (its size is `--disturbance`).
+    #[arg(long, value_enum, default_value = "random")]
+    pub disturbance_model: DisturbanceModelArg,
     /// Seed of the disturbance and the measurement noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -256,6 +281,9 @@ pub struct ReachArgs {
     pub sampling: SamplingArg,
     #[arg(long, value_enum, default_value = "none")]
     pub disturbance: DisturbanceArg,
+    /// How the disturbance varies in time (its size is `--disturbance`).
+    #[arg(long, value_enum, default_value = "random")]
+    pub disturbance_model: DisturbanceModelArg,
     /// Seed of the disturbance and the measurement noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

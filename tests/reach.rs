@@ -2,7 +2,7 @@
 //! the minimum rest-to-rest time the generator computed, from rest anywhere
 //! and from a moving state when the target changes mid-run.
 
-use capsule_mpc_generator::config::{Config, DisturbanceConfig};
+use capsule_mpc_generator::config::{Config, DisturbanceConfig, DisturbanceKind};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_sim::closed_loop::{run, Retarget, RunOptions, Sampling};
 use capsule_mpc_sim::metrics::Metrics;
@@ -20,6 +20,7 @@ fn reach(range_m: f64, step_m: f64, start_m: Vec<f64>) -> (Vec<ReachPoint>, Reac
         step_m,
         sampling: Sampling::Ideal,
         disturbance: DisturbanceLevel::None,
+        disturbance_kind: DisturbanceKind::Random,
         seed: 1,
         start_m,
         duration_s: None,

@@ -299,6 +299,10 @@ pub enum DisturbanceKind {
     Random,
     /// A constant vector of norm `bound` (worst-case bias), direction from the seed.
     Constant,
+    /// A slowly varying drift: per component a sum of sinusoids with periods
+    /// of 1-5 s and random phases (from the seed), scaled so that
+    /// ||d|| <= `bound` at every instant. Simulation only.
+    Drift,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

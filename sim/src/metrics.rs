@@ -42,6 +42,17 @@ pub struct Metrics {
     /// Farthest any capsule went beyond the workspace box, m (0: inside).
     #[serde(default)]
     pub workspace_excursion_m: f64,
+    /// First record time at which the state is inside the settle band
+    /// (every position within [`SETTLE_POSITION_TOL_M`], every speed below
+    /// [`SETTLE_SPEED_TOL_M_PER_S`]); `null` if never.
+    #[serde(default)]
+    pub first_in_band_s: Option<f64>,
+    /// Station keeping: the fraction of the time from `first_in_band_s` to
+    /// the end of the run spent inside the settle band (1 when it never
+    /// leaves it again); `null` when never in the band or entered at the
+    /// last row.
+    #[serde(default)]
+    pub time_in_band_after_entry: Option<f64>,
 }
 
 /// True when every capsule of `x` is inside the settling band around `target`.
@@ -51,6 +62,38 @@ fn in_settle_band(x: &[f64], target: &[f64]) -> bool {
         .all(|(xv, tv)| {
             (xv[0] - tv[0]).abs() <= SETTLE_POSITION_TOL_M && xv[1].abs() < SETTLE_SPEED_TOL_M_PER_S
         })
+}
+
+/// Fraction of the time in [`from_s`, `to_s`) (rows weighted by their
+/// duration, clipped to the window) the state spends inside the settle band
+/// around `target`; `None` for an empty window. Rows are piecewise
+/// constant: a row counts as in or out for its whole duration.
+pub fn time_in_band_fraction(
+    records: &[Record],
+    target: &[f64],
+    from_s: f64,
+    to_s: f64,
+) -> Option<f64> {
+    let (mut inside_s, mut total_s) = (0.0, 0.0);
+    for pair in records.windows(2) {
+        let (a, b) = (pair[0].t_s.max(from_s), pair[1].t_s.min(to_s));
+        if b <= a {
+            continue;
+        }
+        total_s += b - a;
+        if in_settle_band(&pair[0].x, target) {
+            inside_s += b - a;
+        }
+    }
+    (total_s > 0.0).then(|| inside_s / total_s)
+}
+
+/// First record time inside the settle band around `target`.
+pub fn first_in_band_s(records: &[Record], target: &[f64]) -> Option<f64> {
+    records
+        .iter()
+        .find(|r| in_settle_band(&r.x, target))
+        .map(|r| r.t_s)
 }
 
 /// Actuation time over total time for the rows that start before `end_s`.
@@ -131,6 +174,10 @@ impl Metrics {
             })
             .count();
 
+        let first_in_band = first_in_band_s(records, target);
+        let time_in_band_after_entry =
+            first_in_band.and_then(|t| time_in_band_fraction(records, target, t, f64::INFINITY));
+
         Ok(Metrics {
             settle_time_s,
             final_position_error_m,
@@ -142,6 +189,8 @@ impl Metrics {
             min_time_bound_s: None,
             settle_over_bound: None,
             workspace_excursion_m: 0.0,
+            first_in_band_s: first_in_band,
+            time_in_band_after_entry,
         })
     }
 }
@@ -174,6 +223,36 @@ mod tests {
         let m = Metrics::compute(&records, &TARGET, 0.1, 0.5, 0).unwrap();
         assert_eq!(m.settle_time_s, Some(0.5));
         assert!((m.final_position_error_m - 0.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn time_in_band_counts_from_the_first_entry() {
+        // Out until 0.2, in 0.2-0.3, out 0.3-0.4 (1.5 mm off), in from 0.4.
+        let xs = [0.0, 0.01, 0.0195, 0.0215, 0.0201, 0.02, 0.02];
+        let records: Vec<Record> = xs
+            .iter()
+            .enumerate()
+            .map(|(k, &x)| row(0.1 * k as f64, x, 0.0, 0.0, Phase::Track))
+            .collect();
+        let m = Metrics::compute(&records, &TARGET, 0.1, 0.5, 0).unwrap();
+        assert_eq!(m.first_in_band_s, Some(0.2));
+        // 0.2 .. 0.6: 0.4 s, of which 0.1 s out.
+        let f = m.time_in_band_after_entry.unwrap();
+        assert!((f - 0.75).abs() < 1e-12, "{f}");
+        // A window clips rows: 0.25 .. 0.45 is half out.
+        let w = time_in_band_fraction(&records, &TARGET, 0.25, 0.45).unwrap();
+        assert!((w - 0.5).abs() < 1e-12, "{w}");
+        assert_eq!(time_in_band_fraction(&records, &TARGET, 0.7, 0.8), None);
+        // Never in the band: no entry, no fraction.
+        let far = vec![
+            row(0.0, 0.0, 0.0, 0.0, Phase::Track),
+            row(0.1, 0.0, 0.0, 0.0, Phase::Track),
+        ];
+        let m = Metrics::compute(&far, &TARGET, 0.1, 0.5, 0).unwrap();
+        assert_eq!(
+            (m.first_in_band_s, m.time_in_band_after_entry),
+            (None, None)
+        );
     }
 
     #[test]
@@ -231,10 +310,15 @@ mod tests {
             "duty_cycle_until_settled",
             "state_bound_violations",
             "max_step_compute_ns",
+            "min_time_bound_s",
+            "settle_over_bound",
+            "workspace_excursion_m",
+            "first_in_band_s",
+            "time_in_band_after_entry",
         ] {
             assert!(keys.contains(&k), "{k}");
         }
-        assert_eq!(keys.len(), 7);
+        assert_eq!(keys.len(), 12);
     }
 
     #[test]

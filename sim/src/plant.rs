@@ -23,6 +23,11 @@ pub const DEFAULT_MAX_STEP_S: f64 = 1e-3;
 /// scanner sample).
 pub const DEFAULT_REDRAW_PERIOD_S: f64 = 0.02;
 
+/// Sinusoids per component of a `drift` disturbance.
+pub const DRIFT_TERMS: usize = 3;
+/// Shortest and longest period of a `drift` sinusoid, s.
+pub const DRIFT_PERIOD_RANGE_S: (f64, f64) = (1.0, 5.0);
+
 /// The paper's disturbance bound, read as cm/s and cm/s^2.
 pub const PAPER_DISTURBANCE_BOUND_CM: f64 = 0.05;
 
@@ -62,6 +67,21 @@ impl DisturbanceLevel {
         }
     }
 
+    /// The disturbance config for this level with another model (`kind`)
+    /// of the same size: `None` stays no disturbance whatever `kind` is.
+    pub fn config_of_kind(
+        self,
+        model: &Model,
+        seed: u64,
+        kind: DisturbanceKind,
+    ) -> DisturbanceConfig {
+        let mut c = self.config(model, seed);
+        if self != DisturbanceLevel::None {
+            c.kind = kind;
+        }
+        c
+    }
+
     /// The disturbance config for this level; `seed` is stored in the config.
     pub fn config(self, model: &Model, seed: u64) -> DisturbanceConfig {
         match self {
@@ -87,6 +107,30 @@ impl DisturbanceLevel {
                 }
             }
         }
+    }
+}
+
+/// Parses a disturbance model: "random" | "drift" | "constant" | "none"
+/// (case-insensitive).
+pub fn disturbance_kind_from_name(name: &str) -> Result<DisturbanceKind> {
+    match name.to_ascii_lowercase().as_str() {
+        "none" => Ok(DisturbanceKind::None),
+        "random" => Ok(DisturbanceKind::Random),
+        "drift" => Ok(DisturbanceKind::Drift),
+        "constant" => Ok(DisturbanceKind::Constant),
+        other => {
+            bail!("unknown disturbance model `{other}` (expected random, drift, constant or none)")
+        }
+    }
+}
+
+/// Lower-case name of a disturbance model (as [`disturbance_kind_from_name`] reads it).
+pub fn disturbance_kind_name(kind: DisturbanceKind) -> &'static str {
+    match kind {
+        DisturbanceKind::None => "none",
+        DisturbanceKind::Random => "random",
+        DisturbanceKind::Drift => "drift",
+        DisturbanceKind::Constant => "constant",
     }
 }
 
@@ -119,6 +163,9 @@ struct Disturbance {
     /// Index of the redraw interval `current` belongs to (random kind).
     interval: Option<u64>,
     current: Vec<f64>,
+    /// Drift kind: per component, [`DRIFT_TERMS`] (weight, angular
+    /// frequency rad/s, phase rad); the weights of a component sum to 1.
+    drift: Vec<[(f64, f64, f64); DRIFT_TERMS]>,
 }
 
 impl Disturbance {
@@ -135,6 +182,11 @@ impl Disturbance {
                 *c = bound_si * e;
             }
         }
+        let drift = if config.kind == DisturbanceKind::Drift && bound_si > 0.0 {
+            (0..n).map(|_| drift_terms(&mut rng)).collect()
+        } else {
+            Vec::new()
+        };
         Disturbance {
             kind: config.kind,
             bound_si,
@@ -142,6 +194,7 @@ impl Disturbance {
             rng,
             interval: None,
             current,
+            drift,
         }
     }
 
@@ -156,8 +209,44 @@ impl Disturbance {
                 self.current = uniform_in_ball(&mut self.rng, self.current.len(), self.bound_si);
             }
         }
+        if !self.drift.is_empty() {
+            // Each component lies in [-1, 1]; the vector is pulled back onto
+            // the unit ball when it leaves it, then scaled by the bound.
+            for (c, terms) in self.current.iter_mut().zip(&self.drift) {
+                *c = terms
+                    .iter()
+                    .map(|(w, om, ph)| w * (om * t_s + ph).sin())
+                    .sum();
+            }
+            let norm = self.current.iter().map(|e| e * e).sum::<f64>().sqrt();
+            let scale = self.bound_si / norm.max(1.0);
+            for c in &mut self.current {
+                *c *= scale;
+            }
+        }
         &self.current
     }
+}
+
+/// One component of a drift disturbance: [`DRIFT_TERMS`] sinusoids with
+/// periods uniform in [`DRIFT_PERIOD_RANGE_S`], random phases and random
+/// weights summing to 1.
+fn drift_terms(rng: &mut ChaCha8Rng) -> [(f64, f64, f64); DRIFT_TERMS] {
+    let (lo, hi) = DRIFT_PERIOD_RANGE_S;
+    let mut terms = [(0.0, 0.0, 0.0); DRIFT_TERMS];
+    for t in &mut terms {
+        let period = lo + (hi - lo) * rng.gen::<f64>();
+        *t = (
+            0.5 + rng.gen::<f64>(),
+            std::f64::consts::TAU / period,
+            std::f64::consts::TAU * rng.gen::<f64>(),
+        );
+    }
+    let total: f64 = terms.iter().map(|t| t.0).sum();
+    for t in &mut terms {
+        t.0 /= total;
+    }
+    terms
 }
 
 /// RK4 stage point: `out = x + scale * k`.
@@ -458,6 +547,54 @@ mod tests {
         }
         let norm = d0.iter().map(|e| e * e).sum::<f64>().sqrt();
         assert!((norm - 0.3).abs() < 1e-12, "{norm}");
+    }
+
+    #[test]
+    fn drift_is_smooth_bounded_and_seeded() {
+        let m = model();
+        let cfg = DisturbanceLevel::Paper.config_of_kind(&m, 4, DisturbanceKind::Drift);
+        let bound = cfg.bound_si();
+        let run = |seed: u64| {
+            let mut p = Plant::new(m.clone(), vec![0.0; 4], cfg.clone(), 0.0, seed).unwrap();
+            p.advance(6.0, 0.0, Phase::Track).unwrap();
+            p.into_records()
+        };
+        let r = run(7);
+        assert_eq!(r, run(7));
+        assert_ne!(
+            r.iter().map(|x| x.d.clone()).collect::<Vec<_>>(),
+            run(8).iter().map(|x| x.d.clone()).collect::<Vec<_>>()
+        );
+        let norms: Vec<f64> = r
+            .iter()
+            .map(|x| x.d.iter().map(|e| e * e).sum::<f64>().sqrt())
+            .collect();
+        assert!(norms.iter().all(|&n| n <= bound * (1.0 + 1e-12)));
+        // Of the paper's size, not a vanishing drift.
+        let mean = norms.iter().sum::<f64>() / norms.len() as f64;
+        assert!(mean > 0.4 * bound, "mean ||d|| {mean} of {bound}");
+        // Slow: over one 1 ms row no component moves more than
+        // bound * 2 pi / 1 s * 1 ms (plus the norm clipping).
+        for w in r.windows(2) {
+            for (a, b) in w[0].d.iter().zip(&w[1].d) {
+                assert!((a - b).abs() <= bound * 0.02, "{a} -> {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn kinds_parse_and_the_level_keeps_its_size() {
+        let m = model();
+        for name in ["random", "drift", "constant", "none"] {
+            let k = disturbance_kind_from_name(name).unwrap();
+            assert_eq!(disturbance_kind_name(k), name);
+        }
+        assert!(disturbance_kind_from_name("sine").is_err());
+        let c = DisturbanceLevel::Paper.config_of_kind(&m, 1, DisturbanceKind::Constant);
+        assert_eq!(c.kind, DisturbanceKind::Constant);
+        assert!((c.bound_si() - 5e-4).abs() < 1e-15);
+        let n = DisturbanceLevel::None.config_of_kind(&m, 1, DisturbanceKind::Drift);
+        assert_eq!(n.kind, DisturbanceKind::None);
     }
 
     #[test]

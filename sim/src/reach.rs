@@ -11,7 +11,7 @@
 use crate::closed_loop::{run, RunOptions, Sampling};
 use crate::plant::DisturbanceLevel;
 use anyhow::{bail, Result};
-use capsule_mpc_generator::config::{Config, DisturbanceConfig};
+use capsule_mpc_generator::config::{Config, DisturbanceConfig, DisturbanceKind};
 use capsule_mpc_generator::model::Model;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -29,6 +29,8 @@ pub struct ReachOptions {
     pub step_m: f64,
     pub sampling: Sampling,
     pub disturbance: DisturbanceLevel,
+    /// How the disturbance varies in time (its size is `disturbance`).
+    pub disturbance_kind: DisturbanceKind,
     pub seed: u64,
     /// Start positions (at rest), m; the origin when empty.
     pub start_m: Vec<f64>,
@@ -148,7 +150,7 @@ pub fn reach_map(
             run_opts.duration_s = duration_s;
             run_opts.disturbance = match opts.disturbance {
                 DisturbanceLevel::None => DisturbanceConfig::default(),
-                level => level.config(&model, opts.seed),
+                level => level.config_of_kind(&model, opts.seed, opts.disturbance_kind),
             };
             let point = match run(config, &run_opts) {
                 Ok(report) => {

@@ -5,7 +5,7 @@ use crate::cli::{load_config, ReachArgs};
 use crate::figures::heatmap::{plot_heatmap, HeatmapValue};
 use anyhow::{bail, Context, Result};
 use capsule_mpc_sim::closed_loop::Sampling;
-use capsule_mpc_sim::plant::DisturbanceLevel;
+use capsule_mpc_sim::plant::{disturbance_kind_name, DisturbanceLevel};
 use capsule_mpc_sim::reach::{reach_map, ReachOptions, ReachPoint, ReachSummary};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::time::Instant;
@@ -28,6 +28,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         step_m: args.step_cm / 100.0,
         sampling,
         disturbance,
+        disturbance_kind: args.disturbance_model.into(),
         seed: args.seed,
         start_m: args.start.clone().unwrap_or_default(),
         duration_s: args.duration,
@@ -55,10 +56,11 @@ pub fn run(args: &ReachArgs) -> Result<()> {
     print_table(&points);
     let fmt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
     println!(
-        "{} targets ({} sampling, disturbance {:?}, seed {}) in {:.1} s: {} refused, {} never settled; settle / min-time bound median {} worst {}{}; settle time median {} s worst {} s",
+        "{} targets ({} sampling, disturbance {:?} {}, seed {}) in {:.1} s: {} refused, {} never settled; settle / min-time bound median {} worst {}{}; settle time median {} s worst {} s",
         summary.targets,
         sampling.name(),
         disturbance,
+        disturbance_kind_name(opts.disturbance_kind),
         args.seed,
         started.elapsed().as_secs_f64(),
         summary.refused,
@@ -76,6 +78,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         let json = serde_json::json!({
             "sampling": sampling.name(),
             "disturbance": format!("{disturbance:?}").to_lowercase(),
+            "disturbance_model": disturbance_kind_name(opts.disturbance_kind),
             "seed": args.seed,
             "range_m": opts.range_m,
             "step_m": opts.step_m,

@@ -4,10 +4,10 @@
 use crate::cli::{load_config, SimulateArgs};
 use crate::figures::plot_run;
 use anyhow::Result;
-use capsule_mpc_generator::config::DisturbanceConfig;
+use capsule_mpc_generator::config::{DisturbanceConfig, DisturbanceKind};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_sim::closed_loop::{self, Preset, RunOptions, Sampling};
-use capsule_mpc_sim::plant::DisturbanceLevel;
+use capsule_mpc_sim::plant::{disturbance_kind_name, DisturbanceLevel};
 
 /// `capsule-mpc simulate`.
 pub fn run(args: &SimulateArgs) -> Result<()> {
@@ -23,7 +23,8 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     opts.start_m = args.start_positions(model.capsule_count())?;
     opts.duration_s = args.duration;
     opts.seed = args.seed;
-    opts.disturbance = disturbance.config(&model, args.seed);
+    let kind = DisturbanceKind::from(args.disturbance_model);
+    opts.disturbance = disturbance.config_of_kind(&model, args.seed, kind);
     opts.preset = preset;
     opts.switching = args.switching.into();
     opts.compensate_delay = !args.no_delay_compensation;
@@ -37,20 +38,30 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     }
     let mut report = closed_loop::run(&config, &opts)?;
     report.scenario = Some(args.scenario_name().to_string());
-    report.disturbance = Some(format!("{disturbance:?}").to_lowercase());
+    report.disturbance = Some(if disturbance == DisturbanceLevel::None {
+        "none".to_string()
+    } else if kind == DisturbanceKind::Random {
+        format!("{disturbance:?}").to_lowercase()
+    } else {
+        format!("{disturbance:?}-{}", disturbance_kind_name(kind)).to_lowercase()
+    });
     let m = &report.metrics;
     println!(
-        "scenario {} ({} sampling, {:?} preset, disturbance {:?}, seed {}): settle {}{} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
+        "scenario {} ({} sampling, {:?} preset, disturbance {}, seed {}): settle {}{} | in band {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
         args.scenario_name(),
         sampling.name(),
         preset,
-        disturbance,
+        report.disturbance.as_deref().unwrap_or("none"),
         args.seed,
         m.settle_time_s.map_or("never".to_string(), |t| format!("{t:.3} s")),
         m.min_time_bound_s.map_or(String::new(), |b| format!(
             " (min-time bound {b:.3} s{})",
             m.settle_over_bound.map_or(String::new(), |r| format!(", ratio {r:.2}"))
         )),
+        match (m.first_in_band_s, m.time_in_band_after_entry) {
+            (Some(t), Some(f)) => format!("{:.1} % from {t:.3} s", 100.0 * f),
+            _ => "never".to_string(),
+        },
         m.final_position_error_m * 1e3,
         m.max_abs_u * 1e3,
         m.duty_cycle,
