@@ -53,6 +53,32 @@ pub struct Metrics {
     /// last row.
     #[serde(default)]
     pub time_in_band_after_entry: Option<f64>,
+    /// Earliest record time from which the state stays in the settle band
+    /// for at least [`SETTLE_HOLD_S`] (the arrival, robust to the slow
+    /// relative drift that can take the capsules out seconds later; see
+    /// README, Known limits); `null` if never. `settle_over_bound` uses it.
+    #[serde(default)]
+    pub settle_held_s: Option<f64>,
+}
+
+/// How long the state must stay in the band for `settle_held_s`, s.
+pub const SETTLE_HOLD_S: f64 = 1.0;
+
+/// Earliest record time from which every row for the next `hold_s` lies in
+/// the settle band around `target` (the run must last that long).
+pub fn settle_held_s(records: &[Record], target: &[f64], hold_s: f64) -> Option<f64> {
+    let mut start: Option<f64> = None;
+    for r in records {
+        if in_settle_band(&r.x, target) {
+            let t0 = *start.get_or_insert(r.t_s);
+            if r.t_s - t0 >= hold_s - 1e-9 {
+                return Some(t0);
+            }
+        } else {
+            start = None;
+        }
+    }
+    None
 }
 
 /// True when every capsule of `x` is inside the settling band around `target`.
@@ -191,6 +217,7 @@ impl Metrics {
             workspace_excursion_m: 0.0,
             first_in_band_s: first_in_band,
             time_in_band_after_entry,
+            settle_held_s: settle_held_s(records, target, SETTLE_HOLD_S),
         })
     }
 }
@@ -315,10 +342,11 @@ mod tests {
             "workspace_excursion_m",
             "first_in_band_s",
             "time_in_band_after_entry",
+            "settle_held_s",
         ] {
             assert!(keys.contains(&k), "{k}");
         }
-        assert_eq!(keys.len(), 12);
+        assert_eq!(keys.len(), 13);
     }
 
     #[test]

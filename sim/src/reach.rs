@@ -60,6 +60,8 @@ pub struct ReachPoint {
     pub target_m: Vec<f64>,
     /// Why the target was refused (None: it was run).
     pub refused: Option<String>,
+    /// Arrival: in the settle band and held there for 1 s
+    /// (`Metrics::settle_held_s`).
     pub settle_time_s: Option<f64>,
     pub min_time_bound_s: Option<f64>,
     pub settle_over_bound: Option<f64>,
@@ -158,7 +160,7 @@ pub fn reach_map(
                     ReachPoint {
                         target_m: t.clone(),
                         refused: None,
-                        settle_time_s: m.settle_time_s,
+                        settle_time_s: m.settle_held_s,
                         min_time_bound_s: m.min_time_bound_s,
                         settle_over_bound: m.settle_over_bound,
                         final_position_error_m: Some(m.final_position_error_m),

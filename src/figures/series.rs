@@ -209,6 +209,7 @@ mod tests {
                 min_time_bound_s: None,
                 settle_over_bound: None,
                 workspace_excursion_m: 0.0,
+                settle_held_s: None,
                 first_in_band_s: None,
                 time_in_band_after_entry: None,
             },
