@@ -239,22 +239,9 @@ impl SimulateArgs {
         Ok(target)
     }
 
-    /// The start positions for `capsules` capsules (empty: the origin).
-    /// Errors on a wrong length or non-finite value.
+    /// The start positions for `capsules` capsules (see [`start_positions`]).
     pub fn start_positions(&self, capsules: usize) -> Result<Vec<f64>> {
-        let Some(start) = &self.start else {
-            return Ok(Vec::new());
-        };
-        if start.len() != capsules {
-            bail!(
-                "--start has {} positions; the config has {capsules} capsules",
-                start.len()
-            );
-        }
-        if start.iter().any(|v| !v.is_finite()) {
-            bail!("--start {start:?} is not finite");
-        }
-        Ok(start.clone())
+        start_positions(self.start.as_deref(), capsules)
     }
 
     /// "A", "C" or "custom" (for reports).
@@ -354,6 +341,24 @@ pub struct FiguresArgs {
     /// Simulated time per run, s.
     #[arg(long, default_value_t = 3.0, value_parser = positive_seconds)]
     pub duration: f64,
+}
+
+/// `--start` for `capsules` capsules (empty: the origin). Errors on a wrong
+/// length or a non-finite value; the workspace is checked by the run.
+pub fn start_positions(start: Option<&[f64]>, capsules: usize) -> Result<Vec<f64>> {
+    let Some(start) = start else {
+        return Ok(Vec::new());
+    };
+    if start.len() != capsules {
+        bail!(
+            "--start has {} positions; the config has {capsules} capsules",
+            start.len()
+        );
+    }
+    if start.iter().any(|v| !v.is_finite()) {
+        bail!("--start {start:?} is not finite");
+    }
+    Ok(start.to_vec())
 }
 
 /// clap value parser: a finite positive number of seconds.

@@ -172,6 +172,9 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         .try_into()
         .with_context(|| format!("target needs {NX} entries"))?;
     let mut x0 = vec![0.0; NX];
+    if opts.start_m.iter().any(|p| !p.is_finite()) {
+        bail!("start {:?} m is not finite", opts.start_m);
+    }
     if !opts.start_m.is_empty() {
         if opts.start_m.len() != NX / 2 {
             bail!(

@@ -1,7 +1,7 @@
 //! `capsule-mpc reach`: the closed loop to every target of a grid, as a
 //! table, a summary of the worst cases, JSON and heatmaps.
 
-use crate::cli::{load_config, ReachArgs};
+use crate::cli::{load_config, start_positions, ReachArgs};
 use crate::figures::heatmap::{plot_heatmap, HeatmapValue};
 use anyhow::{bail, Context, Result};
 use capsule_mpc_sim::closed_loop::Sampling;
@@ -30,7 +30,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         disturbance,
         disturbance_kind: args.disturbance_model.into(),
         seed: args.seed,
-        start_m: args.start.clone().unwrap_or_default(),
+        start_m: start_positions(args.start.as_deref(), config.capsule_count())?,
         duration_s: args.duration,
     };
     let targets = capsule_mpc_sim::reach::grid_targets(
