@@ -138,6 +138,19 @@ pub fn reach_map(
             start.len()
         );
     }
+    // A start outside the workspace would refuse every target: say so once.
+    let ws = &config.workspace;
+    for (i, &p) in start.iter().enumerate() {
+        if let Some(excess_m) = ws.excess_m(p) {
+            bail!(
+                "start: capsule {} at {p} m is outside the workspace [{}, {}] m by {:.4} m (config section [workspace])",
+                i + 1,
+                ws.position_min_m,
+                ws.position_max_m,
+                excess_m.abs()
+            );
+        }
+    }
     let targets = grid_targets(&start, opts.range_m, opts.step_m)?;
     let duration_s = opts
         .duration_s
