@@ -77,8 +77,8 @@ extern "C" {
  *                       Keep the loop running: the controller plans again as
  *                       soon as the state is back in range, or, at rest,
  *                       starts RECOVERING. Persistent FALLBACK at rest means
- *                       no stored plan gets the capsules nearer the target:
- *                       set a nearer target.
+ *                       the estimate disagrees with the frames (the legs are
+ *                       not re-planned then): check tracking.
  *   ITERATION_LIMIT     a QP hit its bound; the best feasible plan. Log it.
  *   MEASUREMENT_REJECTED the frame was implausible (non-finite, |x| > 1 m,
  *                       beyond the 5-sigma gate, or part of a glitch: up to
@@ -95,9 +95,10 @@ extern "C" {
  *   ABOVE_ITERATION_MAP a QP took more iterations than measured offline for
  *                       this state; the plan is converged. Log it.
  *   RECOVERING          after a FALLBACK at rest outside the tables, the
- *                       controller moves the capsules along stored plans to
- *                       intermediate points until the tables reach the target.
- *                       Keep the loop running. */
+ *                       controller re-planned its chained legs from where the
+ *                       capsules are: stored plans through waypoints toward
+ *                       the target, reported until the last leg. Keep the
+ *                       loop running. */
 #define CAPSULE_MPC_STATUS_OK 0
 #define CAPSULE_MPC_STATUS_FALLBACK 1
 #define CAPSULE_MPC_STATUS_ITERATION_LIMIT 2
