@@ -133,8 +133,11 @@ int32_t capsule_mpc_init(void *buffer, size_t size, const double *positions_m, s
 int32_t capsule_mpc_reset(capsule_mpc_t *handle, const double *positions_m, size_t n);
 
 /* Target [x1, v1, x2, v2, ...] (n = 2M). Speeds must be 0
- * (CAPSULE_MPC_ERR_TARGET_NOT_AT_REST); TARGET_OUT_OF_RANGE when no stored
- * plan reaches it from the current estimate. */
+ * (CAPSULE_MPC_ERR_TARGET_NOT_AT_REST); every position must lie in the
+ * workspace the solver was generated for (default [-0.06, 0.06] m), else
+ * TARGET_OUT_OF_RANGE. Reached from wherever the capsules are, moving or
+ * not, through waypoints (chained stored plans) when one plan is not
+ * enough. */
 int32_t capsule_mpc_set_target(capsule_mpc_t *handle, const double *target, size_t n);
 
 /* CAPSULE_MPC_SAMPLING_*; restarts the estimate at rest at the current
