@@ -133,3 +133,46 @@ fn inspect_json_on_the_default() {
     assert!(v["lipschitz_f"].as_f64().unwrap() >= 1.0);
     assert_eq!(v["config"]["capsule"].as_array().unwrap().len(), 2);
 }
+
+/// Issue 13: targets and starts outside the workspace, from the command
+/// line: one error line naming the capsule, the bound and the excess; a
+/// bad workspace section names its field.
+#[test]
+fn workspace_errors_name_the_capsule_bound_and_excess() {
+    let out = bin()
+        .args([
+            "simulate",
+            "--target",
+            "0.02,0,-0.075,0",
+            "--sampling",
+            "ideal",
+        ])
+        .output()
+        .unwrap();
+    assert_one_line_error(
+        &out,
+        "capsule 2 at -0.075 m is outside the workspace [-0.06, 0.06] m by 0.0150 m (below the lower bound",
+    );
+    let out = bin()
+        .args(["simulate", "--start", "0.07,0", "--scenario", "A"])
+        .output()
+        .unwrap();
+    assert_one_line_error(
+        &out,
+        "start [0.07, 0.0] m: capsule 1 at 0.07 m is outside the workspace",
+    );
+    let out = bin()
+        .args(["reach", "--start", "0,-0.1", "--range-cm", "1"])
+        .output()
+        .unwrap();
+    assert_one_line_error(&out, "start: capsule 2 at -0.1 m is outside the workspace");
+    let out = bin()
+        .args(["simulate", "--start", "0.01", "--scenario", "A"])
+        .output()
+        .unwrap();
+    assert_one_line_error(&out, "--start has 1 positions; the config has 2 capsules");
+    let out = inspect_with(&format!(
+        "{DEFAULT_CONFIG_TOML}\n[workspace]\nposition_min_m = 0.02\nposition_max_m = 0.01\n"
+    ));
+    assert_one_line_error(&out, "workspace.position_max_m");
+}
