@@ -610,36 +610,12 @@ fn next_actuation_last_status_estimate_bad_args() {
 
 // ---- good path ----
 
-const G: [f64; 2] = [173.25, 173.25];
-const B: [f64; 2] = [134.7, 16.84];
-
-fn deriv(s: &[f64; 4], u: f64) -> [f64; 4] {
-    let mut d = [0.0; 4];
-    for i in 0..2 {
-        let v = s[2 * i + 1];
-        d[2 * i] = v;
-        d[2 * i + 1] = -B[i] * v * v.abs() + G[i] * u;
-    }
-    d
-}
-
-fn rk4(s: &mut [f64; 4], u: f64, h: f64) {
-    let add =
-        |a: &[f64; 4], k: &[f64; 4], c: f64| std::array::from_fn::<f64, 4, _>(|j| a[j] + c * k[j]);
-    let k1 = deriv(s, u);
-    let k2 = deriv(&add(s, &k1, h / 2.0), u);
-    let k3 = deriv(&add(s, &k2, h / 2.0), u);
-    let k4 = deriv(&add(s, &k3, h), u);
-    for j in 0..4 {
-        s[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
-    }
-}
+#[path = "common/plant.rs"]
+mod plant;
 
 /// Holds `u` for 20 ms at 1 ms RK4 steps.
 fn hold(s: &mut [f64; 4], u: f64) {
-    for _ in 0..20 {
-        rk4(s, u, 1e-3);
-    }
+    plant::hold_for(s, u, 0.02);
 }
 
 /// Scenario C through the C functions; returns the final plant state.
@@ -706,9 +682,12 @@ fn good_path_closed_loop_scenario_c() {
 /// A wrong `capsule_mpc_reset` mid-run (15 and 12 mm off): the next frames
 /// are rejected, the REACQUIRE_AFTER_REJECTIONS-th reports
 /// CAPSULE_MPC_STATUS_REACQUIRED (also from last_status), and the loop
-/// still reaches scenario C with |u| <= u_max.
+/// still reaches scenario C with |u| <= u_max. The reset comes at 0.5 s,
+/// mid-manoeuvre (the minimum-time plans move fast then): after 4 s the
+/// capsules were still 3.6 mm off and moving, so the run lasts 6 s.
 #[test]
 fn wrong_reset_is_reacquired_through_the_c_abi() {
+    const END_S: f64 = 6.0;
     use capsule_mpc_runtime::controller::REACQUIRE_AFTER_REJECTIONS;
     let mut b = initialized();
     let h = handle(&mut b);
@@ -727,7 +706,7 @@ fn wrong_reset_is_reacquired_through_the_c_abi() {
             capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
             CAPSULE_MPC_OK
         );
-        while t < 4.0 - 1e-9 {
+        while t < END_S - 1e-9 {
             if reset_at.is_none() && t >= 0.5 {
                 let wrong = [s[0] + 0.015, s[2] - 0.012];
                 assert_eq!(capsule_mpc_reset(h, wrong.as_ptr(), 2), CAPSULE_MPC_OK);

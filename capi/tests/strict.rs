@@ -211,35 +211,9 @@ fn implausible_time_stamps_are_refused() {
 
 // ---- a host with its own plant ----
 
-const G: [f64; 2] = [173.25, 173.25];
-const B: [f64; 2] = [134.7, 16.84];
-
-fn deriv(s: &[f64; 4], u: f64) -> [f64; 4] {
-    let mut d = [0.0; 4];
-    for i in 0..2 {
-        let v = s[2 * i + 1];
-        d[2 * i] = v;
-        d[2 * i + 1] = -B[i] * v * v.abs() + G[i] * u;
-    }
-    d
-}
-
-/// Holds `u` for `duration_s` in 1 ms RK4 steps.
-fn hold(s: &mut [f64; 4], u: f64, duration_s: f64) {
-    let steps = (duration_s / 1e-3).round() as usize;
-    let h = 1e-3;
-    let add =
-        |a: &[f64; 4], k: &[f64; 4], c: f64| std::array::from_fn::<f64, 4, _>(|j| a[j] + c * k[j]);
-    for _ in 0..steps {
-        let k1 = deriv(s, u);
-        let k2 = deriv(&add(s, &k1, h / 2.0), u);
-        let k3 = deriv(&add(s, &k2, h / 2.0), u);
-        let k4 = deriv(&add(s, &k3, h), u);
-        for j in 0..4 {
-            s[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
-        }
-    }
-}
+#[path = "common/plant.rs"]
+mod plant;
+use plant::hold_for as hold;
 
 /// Runs scenario C through the C ABI for `end_s` with tracking phases of
 /// `tracking_s(cycle)`, frames `glitch(t_measured)` m off the truth.
