@@ -39,13 +39,13 @@ pub struct ReachOptions {
     pub duration_s: Option<f64>,
 }
 
-/// Simulated time per run when none is given: 2 s plus 0.5 s per cm of the
+/// Simulated time per run when none is given: 3 s plus 0.5 s per cm of the
 /// grid's half-width (ideal sampling), 1.5 times that on the scanner cycle,
-/// at most 30 s: the slowest moves of the default grid settle inside its
-/// first half, and the settle time counts only when the capsules then stay
-/// in the band to the end.
+/// at most 30 s: the slowest moves of the default grid arrive within its
+/// first half, and an arrival counts once the capsules have stayed in the
+/// band for 1 s (`settle_held_s`).
 pub fn default_duration_s(range_m: f64, sampling: Sampling) -> f64 {
-    let ideal = 2.0 + 50.0 * range_m;
+    let ideal = 3.0 + 50.0 * range_m;
     let s = match sampling {
         Sampling::Ideal => ideal,
         Sampling::Constant | Sampling::Variable => 1.5 * ideal,
