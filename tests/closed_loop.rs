@@ -193,10 +193,9 @@ fn paper_switching_rule_is_too_conservative_to_extend() {
 
 /// With a 30 ms compute/transfer delay, predicting through tracking + delay
 /// beats solving from the stale measurement (the paper's way): measured
-/// over seeds 1-3 on A, compensated settles in 1.3-4.8 s (sum 8.0 s),
-/// uncompensated in 2.4 s, 2.8 s and never (sum 11.2 s, a miss counted as
-/// the 6 s run); before the minimum-time tables 3.8-4.7 s against one
-/// settle in three.
+/// over seeds 1-3, compensated settles in 1.3-2.2 s, uncompensated in
+/// 2.6-3.9 s (before the minimum-time tables: 3.8-4.7 s against one
+/// settle in three).
 #[test]
 fn delay_compensation_is_measurably_better() {
     let (mut settle_comp, mut settle_raw) = (0.0, 0.0);

@@ -373,22 +373,11 @@ pub const FINISH_BAND: Band = Band {
     speed_m_per_s: 0.05e-3,
 };
 
-/// Samples added after the minimum-time arrival to finish at rest: 2, and
-/// 1 for plans shorter than [`SHORT_PLAN_SAMPLES`] (for the shortest moves,
-/// 0.16 s, a second sample would add an eighth to the arrival).
-pub fn finish_samples(arrival_samples: usize) -> usize {
-    if arrival_samples < SHORT_PLAN_SAMPLES {
-        1
-    } else {
-        2
-    }
-}
-
-/// See [`finish_samples`].
-pub const SHORT_PLAN_SAMPLES: usize = 15;
+/// Samples added after the minimum-time arrival to finish at rest.
+pub const FINISH_SAMPLES: usize = 2;
 
 /// The minimum-time inputs `arrived` (length T), padded with
-/// [`finish_samples`] zero samples and re-solved over that length
+/// [`FINISH_SAMPLES`] zero samples and re-solved over T + FINISH_SAMPLES
 /// toward [`FINISH_BAND`]; the padded inputs when that does not end nearer
 /// rest, `arrived` itself when it does not fit in `max_samples`.
 pub fn finish_at_rest(
@@ -398,7 +387,7 @@ pub fn finish_at_rest(
     max_samples: usize,
     sqp_iterations: usize,
 ) -> Vec<f64> {
-    let t = arrived.samples + finish_samples(arrived.samples);
+    let t = arrived.samples + FINISH_SAMPLES;
     if arrived.samples == 0 || t > max_samples {
         return arrived.u.clone();
     }
