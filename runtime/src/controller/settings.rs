@@ -1,0 +1,242 @@
+//! Settings of the scanner-cycle controller: the sampling mode, the
+//! switching rule, the tunable values with their defaults (named
+//! constants), and the range check every setting passes.
+
+use super::RuntimeError;
+
+/// How the scanner interleaves tracking and actuation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sampling {
+    /// Every sample actuates and the full state is known instantly (the
+    /// paper's nominal idealization).
+    Ideal,
+    /// One actuation sample per tracking phase (Fig. 2a).
+    Constant,
+    /// The switching rule chooses the actuation length (Fig. 2b).
+    Variable,
+}
+
+/// Which switching rule `Sampling::Variable` uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SwitchingRule {
+    /// Condition (17) with the worst-case constants of the paper.
+    Paper,
+    /// The local-bound variant (see [`crate::switching`]).
+    Tight,
+}
+
+/// Settings; defaults come from the generated spec.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControllerSettings {
+    pub sampling: Sampling,
+    pub switching: SwitchingRule,
+    /// Predict the state through tracking + delay before solving (true), or
+    /// solve from the measured state and treat the delay as a disturbance
+    /// (false, the paper's way).
+    pub compensate_delay: bool,
+    /// Tracking phase duration, s: the fixed timing of
+    /// [`Controller::cycle`], and the gap the plans model until
+    /// [`Controller::cycle_at`] has measured one.
+    pub tracking_time_s: f64,
+    /// Extra compute/transfer delay after tracking, s (as `tracking_time_s`).
+    pub extra_delay_s: f64,
+    /// Measurement noise standard deviation, m.
+    pub position_noise_m: f64,
+    /// Disturbance bound gamma, SI (m/s and m/s^2 on the state derivative).
+    pub disturbance_bound: f64,
+    /// Largest actuation length, samples (<= N).
+    pub max_actuation_samples: usize,
+    /// Terminal hold (dual-mode MPC): entered when every estimated position
+    /// error is within `hold_enter_position_m` and every speed within
+    /// `hold_enter_speed_m_per_s`; left when a position error exceeds
+    /// `hold_release_position_m` or a speed `hold_release_speed_m_per_s`.
+    /// Inside, a gentle linear law damps the capsules' common motion instead
+    /// of re-planning separation manoeuvres for errors at the noise level.
+    pub hold_enter_position_m: f64,
+    pub hold_enter_speed_m_per_s: f64,
+    pub hold_release_position_m: f64,
+    pub hold_release_speed_m_per_s: f64,
+    /// Re-acquisition: after this many gated-out frames in a row (finite,
+    /// within `MAX_ABS_POSITION_M`, but beyond `MEASUREMENT_GATE_NIS` of the
+    /// estimate) that agree with one another, with no accepted frame in
+    /// between, the estimate is taken to be wrong (e.g. a `reset` to the
+    /// wrong place) and is restarted from those frames: positions and
+    /// speeds from a filter run over them (see `glitch_frames` for an
+    /// established estimate). Lost and invalid frames neither count nor
+    /// break the run. 0 disables re-acquisition; 1 is refused (every single
+    /// outlier would restart the estimate).
+    pub reacquire_after_rejections: usize,
+    /// Tracking glitches: an estimate confirmed by at least
+    /// `ESTABLISHED_AFTER_FRAMES` accepted frames since the last `reset` or
+    /// re-acquisition is a physical track that cannot jump, so gated-out
+    /// frames that contradict it, even when they agree with one another,
+    /// are taken for a glitch of the tracking and rejected for up to this
+    /// many frames in a row; the next one re-acquires (never before
+    /// `reacquire_after_rejections`).
+    pub glitch_frames: usize,
+}
+impl ControllerSettings {
+    /// Tracking phase + extra delay: the zero-gradient wait between a
+    /// measurement and the actuation it leads to, s.
+    pub fn wait_s(&self) -> f64 {
+        self.tracking_time_s + self.extra_delay_s
+    }
+
+    /// The actuation schedule the solver models under these settings:
+    /// (samples per actuation phase, zero-gradient coast after each phase
+    /// in s). Ideal sampling has no coast (samples back to back); constant
+    /// sampling plays one sample per phase; variable sampling plays
+    /// `phase_samples`.
+    pub fn schedule(&self, phase_samples: usize) -> (usize, f64) {
+        self.schedule_with_gap(phase_samples, self.wait_s())
+    }
+
+    /// [`ControllerSettings::schedule`] with a zero-gradient gap of `gap_s`
+    /// between phases instead of the configured `wait_s()` (the gap the
+    /// host's time stamps show, see `Controller::cycle_at`).
+    pub fn schedule_with_gap(&self, phase_samples: usize, gap_s: f64) -> (usize, f64) {
+        match self.sampling {
+            Sampling::Ideal => (phase_samples, 0.0),
+            Sampling::Constant => (1, gap_s),
+            Sampling::Variable => (phase_samples, gap_s),
+        }
+    }
+}
+
+/// Default hold entry: 0.7 of the 1 mm settle tolerance, m.
+pub const HOLD_ENTER_POSITION_M: f64 = 0.7e-3;
+/// Default hold entry speed: 0.8 of the 5 mm/s settle tolerance, m/s.
+pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 4.0e-3;
+/// Default hold release: 0.8 of the settle tolerance, m (hysteresis keeps
+/// estimate noise from toggling the mode).
+pub const HOLD_RELEASE_POSITION_M: f64 = 1.0e-3;
+/// Default hold release speed, m/s.
+pub const HOLD_RELEASE_SPEED_M_PER_S: f64 = 10.0e-3;
+/// How far ahead the hold entry extrapolates the capsules' relative drift, s.
+pub const HOLD_DRIFT_HORIZON_S: f64 = 1.0;
+/// Natural frequency of the hold law, rad/s (critically damped).
+pub const HOLD_NATURAL_FREQUENCY_RAD_PER_S: f64 = 6.0;
+/// The hold law uses at most this fraction of u_max.
+pub const HOLD_MAX_GRADIENT_FRACTION: f64 = 0.25;
+/// Default re-acquisition count, frames: 0.2 s at the default constant
+/// sampling (20 ms actuation + 20 ms tracking per frame). Five gross
+/// outliers in a row, with none of the frames between them accepted, are
+/// far likelier a wrong estimate than wrong data.
+pub const REACQUIRE_AFTER_REJECTIONS: usize = 5;
+/// Default `ControllerSettings::glitch_frames`: 0.8 s of tracking frames at
+/// the default constant sampling.
+pub const GLITCH_FRAMES: usize = 20;
+/// Accepted frames after which an estimate counts as established (see
+/// `ControllerSettings::glitch_frames`).
+pub const ESTABLISHED_AFTER_FRAMES: usize = 2;
+
+/// Largest gap between the end of one actuation phase and the start of
+/// the next that `Controller::cycle_at` accepts, s. Tracking phases are
+/// tens of ms; a longer pause means the loop stopped (call `reset`).
+pub const MAX_CYCLE_GAP_S: f64 = 1.0;
+/// How far a measurement time may precede the end of the previous
+/// actuation phase (clock rounding between host and controller), s. Within
+/// it the measurement is taken at the actuation end.
+pub const TIME_TOLERANCE_S: f64 = 1.0e-3;
+/// Weight of the newest gap in the running estimate of the tracking gap
+/// the plans model (exponential smoothing): jittering tracking phases are
+/// modelled by about their mean, a change of length is followed within a
+/// few cycles.
+pub const GAP_SMOOTHING: f64 = 0.3;
+/// Speed below which the fallback considers a capsule at rest, m/s (the
+/// settle tolerance).
+pub const REST_SPEED_M_PER_S: f64 = 5.0e-3;
+/// Coasting horizon the fallback's braking law minimizes the drift over, s.
+pub const BRAKING_HORIZON_S: f64 = 1.0;
+/// After re-acquisition the estimate it replaced is kept as an alternative
+/// (a frame glitch re-acquires onto the glitch; when true frames return
+/// they match the replaced estimate) until its position uncertainty
+/// exceeds this, m.
+pub const REPLACED_TRACK_MAX_STD_M: f64 = 5.0e-3;
+
+/// An accepted frame whose normalized innovation squared (summed over the
+/// capsules) exceeds this (3 sigma) keeps the estimate before it as the
+/// replaced track (see `REPLACED_TRACK_MAX_STD_M`); a gated-out frame
+/// within it of the replaced track restores that track.
+pub const REPLACED_TRACK_NIS: f64 = 9.0;
+
+/// A waypoint counts as reached when every position is within this of it, m
+/// (the next leg's plan absorbs the residual).
+pub const WAYPOINT_POSITION_M: f64 = 2.0e-3;
+/// ... and every speed below this, m/s.
+pub const WAYPOINT_SPEED_M_PER_S: f64 = 20.0e-3;
+/// Speed below which the end game restarts from a fine stored plan, m/s
+/// (the settle tolerance).
+pub const END_GAME_REST_SPEED_M_PER_S: f64 = 5.0e-3;
+/// Braking outside the tables re-plans the legs once every speed is below
+/// this, m/s (the stored plans start at rest).
+pub const REPLAN_SPEED_M_PER_S: f64 = 20.0e-3;
+
+/// Normalized innovation squared above which a measurement is rejected
+/// (5 sigma: with Gaussian tracking noise about one frame in two million;
+/// glitches of a few mm at rest are caught, see `glitch_frames`).
+pub const MEASUREMENT_GATE_NIS: f64 = 25.0;
+/// Positions farther than this from the origin are not physical, m.
+pub const MAX_ABS_POSITION_M: f64 = 1.0;
+/// Speeds above this are not physical, m/s (terminal speeds at u_max: 0.23
+/// and 0.64 m/s for the default capsules). The estimator's model is not
+/// integrated there: its RK4 prediction overflows to NaN from about 2 m/s,
+/// and a NaN estimate would reject every later frame.
+pub const MAX_ABS_SPEED_M_PER_S: f64 = 1.0;
+/// Floor on the estimator's process noise (acceleration PSD, (m/s^2)^2 s):
+/// model error is never exactly zero.
+pub const MIN_ACCEL_PSD: f64 = 1.0e-6;
+
+/// Every name `RuntimeError::BadSetting` can carry (the settings that are
+/// range-checked), for hosts and tests that map errors back to fields.
+pub const SETTING_NAMES: [&str; 10] = [
+    "tracking_time_s",
+    "extra_delay_s",
+    "position_noise_m",
+    "disturbance_bound",
+    "max_actuation_samples",
+    "hold_enter_position_m",
+    "hold_enter_speed_m_per_s",
+    "hold_release_position_m",
+    "hold_release_speed_m_per_s",
+    "reacquire_after_rejections",
+];
+
+pub(super) fn check_settings(s: &ControllerSettings, n: usize) -> Result<(), RuntimeError> {
+    let finite_nonneg = |v: f64| v.is_finite() && v >= 0.0;
+    if !finite_nonneg(s.tracking_time_s) || s.tracking_time_s > 1.0 {
+        return Err(RuntimeError::BadSetting("tracking_time_s"));
+    }
+    if !finite_nonneg(s.extra_delay_s) || s.extra_delay_s > 1.0 {
+        return Err(RuntimeError::BadSetting("extra_delay_s"));
+    }
+    if !finite_nonneg(s.position_noise_m) || s.position_noise_m > 0.1 {
+        return Err(RuntimeError::BadSetting("position_noise_m"));
+    }
+    if !finite_nonneg(s.disturbance_bound) || s.disturbance_bound > 1e3 {
+        return Err(RuntimeError::BadSetting("disturbance_bound"));
+    }
+    if s.max_actuation_samples == 0 || s.max_actuation_samples > n {
+        return Err(RuntimeError::BadSetting("max_actuation_samples"));
+    }
+    let tolerance = |v: f64| (0.0..=MAX_ABS_POSITION_M).contains(&v);
+    if !tolerance(s.hold_enter_position_m) {
+        return Err(RuntimeError::BadSetting("hold_enter_position_m"));
+    }
+    if !tolerance(s.hold_enter_speed_m_per_s) {
+        return Err(RuntimeError::BadSetting("hold_enter_speed_m_per_s"));
+    }
+    if !tolerance(s.hold_release_position_m) || s.hold_release_position_m < s.hold_enter_position_m
+    {
+        return Err(RuntimeError::BadSetting("hold_release_position_m"));
+    }
+    if !tolerance(s.hold_release_speed_m_per_s)
+        || s.hold_release_speed_m_per_s < s.hold_enter_speed_m_per_s
+    {
+        return Err(RuntimeError::BadSetting("hold_release_speed_m_per_s"));
+    }
+    if s.reacquire_after_rejections == 1 {
+        return Err(RuntimeError::BadSetting("reacquire_after_rejections"));
+    }
+    Ok(())
+}

@@ -1,0 +1,335 @@
+//! Measurements and time: time-stamped cycles, the innovation gate,
+//! glitches and re-acquisition, and the estimator's prediction through
+//! the real gaps.
+
+use super::*;
+
+impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
+    /// One scanner cycle on the host's clock. `measured_positions_m` (None:
+    /// lost) were measured at `t_measured_s`, at the start of the tracking
+    /// phase that just ended; the actuation starts at
+    /// `t_actuation_start_s`. The estimate is predicted at zero gradient
+    /// from the end of the previous actuation phase to the measurement and
+    /// on to the actuation start, and the plans model the gap between
+    /// actuation phases these time stamps show (smoothed over cycles,
+    /// `GAP_SMOOTHING`), so tracking phases of any length, fixed or
+    /// varying, are handled.
+    ///
+    /// Refused with `BadTime` naming the argument, changing nothing: a
+    /// measurement before the previous actuation ended (more than
+    /// `TIME_TOLERANCE_S`: time going backwards), an actuation start before
+    /// the measurement, or more than `MAX_CYCLE_GAP_S` from the previous
+    /// actuation end (or from the measurement, on the first timed cycle) to
+    /// the actuation start. After a longer pause, `reset`.
+    pub fn cycle_at(
+        &mut self,
+        measured_positions_m: Option<&[f64]>,
+        t_measured_s: f64,
+        t_actuation_start_s: f64,
+    ) -> Result<CycleOutput<K>, RuntimeError> {
+        check_frame_length::<NX>(measured_positions_m)?;
+        let (before_s, wait_s, gap_s) = self.check_times(t_measured_s, t_actuation_start_s)?;
+        let first = self.actuation_end_s.is_none();
+        let out = self.step(measured_positions_m, before_s, wait_s, (gap_s, first));
+        self.actuation_end_s = Some(t_actuation_start_s + out.actuation_samples as f64 * S::DT_S);
+        Ok(out)
+    }
+
+    /// End of the last actuation phase on the host's clock (the instant
+    /// `estimate()` describes after a `cycle_at`), s.
+    pub fn actuation_end_s(&self) -> Option<f64> {
+        self.actuation_end_s
+    }
+
+    /// Checks a measurement time against the end of the previous actuation
+    /// phase: `BadTime("t_measured_s")` when it goes backwards, otherwise
+    /// the zero-gradient time from the previous actuation end to it, s.
+    pub fn check_measurement_time(&self, t_measured_s: f64) -> Result<f64, RuntimeError> {
+        if !t_measured_s.is_finite() {
+            return Err(RuntimeError::NonFinite("t_measured_s"));
+        }
+        match self.actuation_end_s {
+            None => Ok(0.0),
+            Some(end_s) => {
+                if t_measured_s < end_s - TIME_TOLERANCE_S {
+                    return Err(RuntimeError::BadTime("t_measured_s"));
+                }
+                if t_measured_s - end_s > MAX_CYCLE_GAP_S {
+                    return Err(RuntimeError::BadTime("t_measured_s"));
+                }
+                Ok((t_measured_s - end_s).max(0.0))
+            }
+        }
+    }
+
+    /// (previous actuation end -> measurement, measurement -> actuation
+    /// start, previous actuation end -> actuation start), s, or the error.
+    pub(super) fn check_times(
+        &self,
+        t_measured_s: f64,
+        t_actuation_start_s: f64,
+    ) -> Result<(f64, f64, f64), RuntimeError> {
+        let before_s = self.check_measurement_time(t_measured_s)?;
+        if !t_actuation_start_s.is_finite() {
+            return Err(RuntimeError::NonFinite("t_actuation_start_s"));
+        }
+        let wait_s = t_actuation_start_s - t_measured_s;
+        if wait_s < 0.0 || before_s + wait_s > MAX_CYCLE_GAP_S {
+            return Err(RuntimeError::BadTime("t_actuation_start_s"));
+        }
+        Ok((before_s, wait_s, before_s + wait_s))
+    }
+
+    /// The cycle after argument checks: predict `before_s` at zero gradient
+    /// to the measurement, fuse it, predict `wait_s` to the actuation
+    /// start, fold `gap.0` (the gap between the last actuation phase and
+    /// this one; `gap.1`: the first of a time base) into the gap the plans
+    /// model, plan.
+    pub(super) fn step(
+        &mut self,
+        measured_positions_m: Option<&[f64]>,
+        before_s: f64,
+        wait_s: f64,
+        gap: (f64, bool),
+    ) -> CycleOutput<K> {
+        if before_s > 0.0 {
+            self.predict_filters(0.0, before_s);
+        }
+        let status = match measured_positions_m {
+            None => RuntimeStatus::MeasurementLost,
+            Some(z) => self.fuse(z),
+        };
+        self.note_gap(gap.0, gap.1);
+        // Tracking + delay pass with u = 0 before the next actuation.
+        let measured = self.estimate();
+        self.predict_filters(0.0, wait_s);
+        let x_start = if self.settings.compensate_delay {
+            self.estimate()
+        } else {
+            measured
+        };
+        let n_max = match self.settings.sampling {
+            Sampling::Ideal | Sampling::Constant => 1,
+            Sampling::Variable => self.settings.max_actuation_samples,
+        };
+        let mut out = self.plan_from(&x_start, status, n_max);
+        if status == RuntimeStatus::Reacquired {
+            // The host must learn that the estimate jumped, even when the
+            // plan is the fallback or there is no target.
+            out.status = RuntimeStatus::Reacquired;
+        }
+        // The estimator follows the actuation that will be played.
+        for k in 0..out.actuation_samples {
+            self.predict_filters(out.gradients_t_per_m[k], S::DT_S);
+        }
+        out
+    }
+
+    /// Folds a measured gap between actuation phases into the running
+    /// estimate the plans model (`GAP_SMOOTHING`; the first cycle of a time
+    /// base takes its gap as is).
+    pub(super) fn note_gap(&mut self, gap_s: f64, first: bool) {
+        let next = if first {
+            gap_s
+        } else {
+            self.gap_s + GAP_SMOOTHING * (gap_s - self.gap_s)
+        };
+        if next != self.gap_s {
+            self.gap_s = next;
+            self.update_schedule();
+        }
+    }
+
+    /// Fuses frame `z` (length checked): accepted, rejected as invalid,
+    /// gated out (counted towards re-acquisition), or re-acquired.
+    pub(super) fn fuse(&mut self, z: &[f64]) -> RuntimeStatus {
+        let r = sq(self.settings.position_noise_m.max(1e-6));
+        let mut class = self.classify_measurement(z);
+        if class == Measurement::Accepted && self.continues_candidate(z, r) {
+            // The estimate's gate has widened while it predicted through
+            // the gated-out frames; a frame that carries on their sequence
+            // belongs to it, not to the estimate.
+            class = Measurement::GatedOut;
+        }
+        match class {
+            Measurement::Invalid => RuntimeStatus::MeasurementRejected,
+            Measurement::Accepted => {
+                self.gated_rejections = 0;
+                self.candidate_frames = 0;
+                self.confirmed_frames = self.confirmed_frames.saturating_add(1);
+                let m = NX / 2;
+                if !self.has_replaced && nis(&self.filters[..m], z, r) > REPLACED_TRACK_NIS {
+                    // A frame that pulls the estimate far (behind a gate
+                    // widened by long open-loop phases) may be the first of
+                    // a glitch: keep the estimate it pulls away from.
+                    self.replaced = self.filters;
+                    self.has_replaced = true;
+                }
+                update_filters(&mut self.filters[..m], z, r);
+                RuntimeStatus::Ok
+            }
+            Measurement::GatedOut => {
+                if self.has_replaced && nis(&self.replaced[..NX / 2], z, r) <= REPLACED_TRACK_NIS {
+                    // The frames are back on the track the last
+                    // re-acquisition replaced: that one was a glitch.
+                    self.filters = self.replaced;
+                    self.has_replaced = false;
+                    update_filters(&mut self.filters[..NX / 2], z, r);
+                    self.after_reacquisition();
+                    self.confirmed_frames = 1;
+                    return RuntimeStatus::Reacquired;
+                }
+                self.gated_rejections = self.gated_rejections.saturating_add(1);
+                self.track_candidate(z, r);
+                let after = self.settings.reacquire_after_rejections;
+                let needed = if self.confirmed_frames >= ESTABLISHED_AFTER_FRAMES {
+                    after.max(self.settings.glitch_frames.saturating_add(1))
+                } else {
+                    after
+                };
+                if after != 0 && self.candidate_frames >= needed {
+                    self.replaced = self.filters;
+                    self.has_replaced = true;
+                    self.filters = self.candidate;
+                    self.after_reacquisition();
+                    RuntimeStatus::Reacquired
+                } else {
+                    RuntimeStatus::MeasurementRejected
+                }
+            }
+        }
+    }
+
+    /// Whether frame `z` carries on the run of gated-out frames: the
+    /// candidate has seen at least two (so it knows their speed) and `z`
+    /// fits it better than the estimate.
+    pub(super) fn continues_candidate(&self, z: &[f64], r: f64) -> bool {
+        let m = NX / 2;
+        self.candidate_frames >= 2
+            && within_gate(&self.candidate[..m], z, r)
+            && nis(&self.candidate[..m], z, r) < nis(&self.filters[..m], z, r)
+    }
+
+    /// Feeds a gated-out frame to the re-acquisition candidate: fused when
+    /// it agrees with the frames before it, else the candidate restarts at
+    /// it (position at the frame, speed zero with a wide uncertainty, so
+    /// that the next frame sets the speed).
+    pub(super) fn track_candidate(&mut self, z: &[f64], r: f64) {
+        let m = NX / 2;
+        if self.candidate_frames > 0 && within_gate(&self.candidate[..m], z, r) {
+            update_filters(&mut self.candidate[..m], z, r);
+            self.candidate_frames += 1;
+        } else {
+            let std = self.settings.position_noise_m.max(1e-6);
+            for (c, &p) in self.candidate.iter_mut().zip(z) {
+                *c = CapsuleFilter::with_speed_std(p, std, REACQUIRE_SPEED_STD_M_PER_S);
+            }
+            self.candidate_frames = 1;
+        }
+    }
+
+    /// The estimate jumped (re-acquired): forget the counters and the plan.
+    pub(super) fn after_reacquisition(&mut self) {
+        self.gated_rejections = 0;
+        self.candidate_frames = 0;
+        self.confirmed_frames = 0;
+        // A leg chosen from the old estimate means nothing now.
+        if self.has_target {
+            let x = self.estimate();
+            self.replan_legs(&x);
+        }
+        self.restart_plan();
+    }
+
+    /// Invalid when any position is non-finite or beyond
+    /// `MAX_ABS_POSITION_M` (bad data, says nothing about the estimate);
+    /// else gated out when any innovation exceeds the gate.
+    pub(super) fn classify_measurement(&self, z: &[f64]) -> Measurement {
+        if z.iter()
+            .any(|zi| !zi.is_finite() || libm::fabs(*zi) > MAX_ABS_POSITION_M)
+        {
+            return Measurement::Invalid;
+        }
+        let r = sq(self.settings.position_noise_m.max(1e-6));
+        if within_gate(&self.filters[..NX / 2], z, r) {
+            Measurement::Accepted
+        } else {
+            Measurement::GatedOut
+        }
+    }
+
+    /// Predicts the estimate (and the re-acquisition candidate and the
+    /// replaced track, while they exist) over `duration_s` at gradient `u`.
+    pub(super) fn predict_filters(&mut self, u: f64, duration_s: f64) {
+        let gamma = self.settings.disturbance_bound;
+        // A disturbance of bound gamma, read as white noise over one sample.
+        let accel_psd = (gamma * gamma * S::DT_S).max(MIN_ACCEL_PSD);
+        let vel_psd = gamma * gamma * S::DT_S;
+        let predict = |filters: &mut [CapsuleFilter]| {
+            for (i, f) in filters.iter_mut().enumerate() {
+                let (next, a) = S::capsule_transition(i, f.mean, u, duration_s);
+                f.predict(next, a, duration_s, accel_psd, vel_psd);
+            }
+        };
+        let m = NX / 2;
+        predict(&mut self.filters[..m]);
+        if self.candidate_frames > 0 {
+            predict(&mut self.candidate[..m]);
+        }
+        if self.has_replaced {
+            predict(&mut self.replaced[..m]);
+            self.has_replaced = self.replaced[..m]
+                .iter()
+                .all(|f| f.position_std_m() <= REPLACED_TRACK_MAX_STD_M);
+        }
+    }
+}
+
+/// What a finite-length frame is to the estimator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Measurement {
+    Accepted,
+    /// Non-finite or beyond the physical range: ignored, not counted.
+    Invalid,
+    /// Plausible but beyond the innovation gate: ignored, counted toward
+    /// re-acquisition.
+    GatedOut,
+}
+
+/// `WrongLength("measured_positions_m")` unless a frame has M positions.
+pub(super) fn check_frame_length<const NX: usize>(z: Option<&[f64]>) -> Result<(), RuntimeError> {
+    match z {
+        Some(z) if z.len() != NX / 2 => Err(RuntimeError::WrongLength("measured_positions_m")),
+        _ => Ok(()),
+    }
+}
+
+/// Whether every position of frame `z` is within the innovation gate
+/// (`MEASUREMENT_GATE_NIS`) of `filters` (measurement variance `r_m2`).
+pub(super) fn within_gate(filters: &[CapsuleFilter], z: &[f64], r_m2: f64) -> bool {
+    filters.iter().zip(z).all(|(f, &zi)| {
+        let innovation = zi - f.mean[0];
+        innovation * innovation / (f.cov[0] + r_m2) <= MEASUREMENT_GATE_NIS
+    })
+}
+
+/// Normalized innovation squared of frame `z` against `filters`, summed
+/// over the capsules.
+pub(super) fn nis(filters: &[CapsuleFilter], z: &[f64], r_m2: f64) -> f64 {
+    filters
+        .iter()
+        .zip(z)
+        .map(|(f, &zi)| sq(zi - f.mean[0]) / (f.cov[0] + r_m2))
+        .sum()
+}
+
+/// Measurement update of every capsule's filter with frame `z`.
+pub(super) fn update_filters(filters: &mut [CapsuleFilter], z: &[f64], r_m2: f64) {
+    for (f, &zi) in filters.iter_mut().zip(z) {
+        f.update(zi, r_m2);
+        // Behind a wide gate (a fresh candidate, or a large disturbance
+        // bound) one frame can imply any speed; beyond the physical range
+        // the model's prediction overflows to NaN.
+        f.mean[1] = f.mean[1].clamp(-MAX_ABS_SPEED_M_PER_S, MAX_ABS_SPEED_M_PER_S);
+    }
+}
