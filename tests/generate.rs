@@ -8,6 +8,24 @@ use capsule_mpc_generator::tables::{Silent, TableError, Tables};
 use std::path::Path;
 use std::process::Command;
 
+/// Copies `entries` (files or folders, recursively) of `from` into `to`.
+fn copy_tree(from: &Path, to: &Path, entries: &[&str]) {
+    std::fs::create_dir_all(to).unwrap();
+    for name in entries {
+        let (src, dst) = (from.join(name), to.join(name));
+        if src.is_dir() {
+            let children: Vec<String> = std::fs::read_dir(&src)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().into_string().unwrap())
+                .collect();
+            let refs: Vec<&str> = children.iter().map(String::as_str).collect();
+            copy_tree(&src, &dst, &refs);
+        } else {
+            std::fs::copy(&src, &dst).unwrap();
+        }
+    }
+}
+
 #[test]
 fn committed_generated_crate_matches_a_fresh_generation() {
     let mut files = generate(&Config::embedded_default(), &Silent).unwrap();
@@ -59,16 +77,11 @@ fn regenerated_solver_for_new_capsules_closes_the_loop() {
     write_atomically(&root.join("generated"), &files).unwrap();
     // The runtime as shipped, pointed at the new generated crate.
     let here = Path::new(env!("CARGO_MANIFEST_DIR"));
-    std::fs::create_dir_all(root.join("runtime/src")).unwrap();
-    for f in [
-        "Cargo.toml",
-        "src/lib.rs",
-        "src/controller.rs",
-        "src/estimator.rs",
-        "src/switching.rs",
-    ] {
-        std::fs::copy(here.join("runtime").join(f), root.join("runtime").join(f)).unwrap();
-    }
+    copy_tree(
+        &here.join("runtime"),
+        &root.join("runtime"),
+        &["Cargo.toml", "src"],
+    );
     std::fs::create_dir_all(root.join("probe/src")).unwrap();
     std::fs::write(
         root.join("Cargo.toml"),
