@@ -3,10 +3,11 @@
 
 use crate::cli::{load_config, start_positions, ReachArgs};
 use crate::figures::heatmap::{plot_heatmap, HeatmapValue};
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use capsule_mpc_sim::closed_loop::Sampling;
 use capsule_mpc_sim::plant::{disturbance_kind_name, DisturbanceLevel};
 use capsule_mpc_sim::reach::{reach_map, ReachOptions, ReachPoint, ReachSummary};
+use capsule_mpc_sim::report::write_json_atomic;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::time::Instant;
 
@@ -85,10 +86,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
             "summary": summary,
             "points": points,
         });
-        let text = serde_json::to_string_pretty(&json)?;
-        let tmp = path.with_extension("json.tmp");
-        std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
-        std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
+        write_json_atomic(path, &json)?;
     }
     if let Some(dir) = &args.plot {
         if config.capsule_count() != 2 {

@@ -81,7 +81,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let below = |speed: f64| (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= speed);
         let beyond = |position: f64| (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > position);
         (below(REPLAN_SPEED_M_PER_S) && beyond(WAYPOINT_POSITION_M))
-            || (below(END_GAME_REST_SPEED_M_PER_S) && beyond(self.settings.hold_enter_position_m))
+            || (below(REST_SPEED_M_PER_S) && beyond(self.settings.hold_enter_position_m))
     }
 }
 

@@ -143,8 +143,9 @@ pub const TIME_TOLERANCE_S: f64 = 1.0e-3;
 /// modelled by about their mean, a change of length is followed within a
 /// few cycles.
 pub const GAP_SMOOTHING: f64 = 0.3;
-/// Speed below which the fallback considers a capsule at rest, m/s (the
-/// settle tolerance).
+/// Speed below which a capsule counts as at rest, m/s (the settle
+/// tolerance): for the fallback's braking and the end game's restart from
+/// a fine stored plan (the emitted solver's `FINE_REST_SPEED_M_PER_S`).
 pub const REST_SPEED_M_PER_S: f64 = 5.0e-3;
 /// Coasting horizon the fallback's braking law minimizes the drift over, s.
 pub const BRAKING_HORIZON_S: f64 = 1.0;
@@ -165,9 +166,6 @@ pub const REPLACED_TRACK_NIS: f64 = 9.0;
 pub const WAYPOINT_POSITION_M: f64 = 2.0e-3;
 /// ... and every speed below this, m/s.
 pub const WAYPOINT_SPEED_M_PER_S: f64 = 20.0e-3;
-/// Speed below which the end game restarts from a fine stored plan, m/s
-/// (the settle tolerance).
-pub const END_GAME_REST_SPEED_M_PER_S: f64 = 5.0e-3;
 /// Braking outside the tables re-plans the legs once every speed is below
 /// this, m/s (the stored plans start at rest).
 pub const REPLAN_SPEED_M_PER_S: f64 = 20.0e-3;
