@@ -105,7 +105,7 @@ pub fn time_scaled(u: &[f64], len: usize) -> Vec<f64> {
 }
 
 /// The result of the search for one start.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MinTimePlan {
     /// Samples to arrival in `band` (the plan's length).
     pub samples: usize,
@@ -205,6 +205,10 @@ pub fn first_arriving(
 /// inner rings, so each ring is solved in parallel and the result does not
 /// depend on the thread count. Odd symmetry (the plan for -e0 is minus the
 /// plan for e0) halves the work.
+///
+/// The per-point work ([`RingSearch::ring_point`],
+/// [`RingSearch::improve_point`]) is a pure function of the plans of the
+/// previous rings, which is what lets `shard` split a ring over processes.
 pub fn grid_min_time_plans(
     base: &Ocp,
     axis: &Axis,
@@ -214,146 +218,249 @@ pub fn grid_min_time_plans(
     sqp_iterations: usize,
     progress: &dyn Progress,
 ) -> Vec<Option<MinTimePlan>> {
-    let m = base.model.capsule_count();
-    let dims = vec![axis.count; m];
-    let total: usize = dims.iter().product();
-    let centre = axis.count / 2;
-    let offset =
-        |idx: &[usize]| -> Vec<i64> { idx.iter().map(|&i| i as i64 - centre as i64).collect() };
-    let ring = |idx: &[usize]| -> usize {
-        offset(idx)
-            .iter()
-            .map(|o| o.unsigned_abs() as usize)
-            .max()
-            .unwrap_or(0)
+    let search = RingSearch {
+        base,
+        axis,
+        band: *band,
+        max_samples,
+        random_starts,
+        sqp_iterations,
     };
-    let flat_of_offset = |o: &[i64]| -> Option<usize> {
-        let idx: Option<Vec<usize>> = o
-            .iter()
-            .map(|&v| {
-                let i = v + centre as i64;
-                (0..axis.count as i64).contains(&i).then_some(i as usize)
-            })
-            .collect();
-        idx.map(|i| flatten(&i, &dims))
-    };
-    let e0_of = |flat: usize| -> Vec<f64> {
-        unflatten(flat, &dims)
-            .iter()
-            .flat_map(|&i| [axis.value(i), 0.0])
-            .collect()
-    };
-    let half = total.div_ceil(2);
-    let mut plans: Vec<Option<MinTimePlan>> = vec![None; total];
-    let centre_flat = flatten(&vec![centre; m], &dims);
-    plans[centre_flat] = Some(MinTimePlan {
-        samples: 0,
-        u: Vec::new(),
-    });
-    progress.start("minimum-time plans", half.saturating_sub(1));
-    for r in 1..=centre {
-        let members: Vec<usize> = (0..half)
-            .filter(|&f| ring(&unflatten(f, &dims)) == r)
-            .collect();
-        let solved: Vec<(usize, Option<MinTimePlan>)> = members
+    let mut plans = search.initial();
+    progress.start("minimum-time plans", search.half().saturating_sub(1));
+    for r in 1..=search.rings() {
+        let solved: Vec<(usize, Option<MinTimePlan>)> = search
+            .ring_members(r)
             .par_iter()
             .map(|&flat| {
-                let e0 = e0_of(flat);
-                let mut guesses: Vec<Vec<f64>> = Vec::new();
-                if r == 1 {
-                    guesses = starting_guesses(
-                        flat as u64,
-                        random_starts,
-                        FIRST_RING_SAMPLES.min(max_samples),
-                        base.model.u_max_t_per_m,
-                    );
-                } else {
-                    let p = offset(&unflatten(flat, &dims));
-                    // Unit steps s toward the target: components 0 or sign(p_i).
-                    for mask in 1..(1usize << m) {
-                        let s: Vec<i64> = (0..m)
-                            .map(|i| if mask >> i & 1 == 1 { p[i].signum() } else { 0 })
-                            .collect();
-                        if s.iter().all(|&v| v == 0) {
-                            continue;
-                        }
-                        let q: Vec<i64> = p.iter().zip(&s).map(|(a, b)| a - b).collect();
-                        let (Some(qf), Some(sf)) = (flat_of_offset(&q), flat_of_offset(&s)) else {
-                            continue;
-                        };
-                        if ring(&unflatten(qf, &dims)) >= r {
-                            continue;
-                        }
-                        let (Some(uq), Some(us)) = (&plans[qf], &plans[sf]) else {
-                            continue;
-                        };
-                        guesses.push([uq.u.as_slice(), us.u.as_slice()].concat());
-                        guesses.push([us.u.as_slice(), uq.u.as_slice()].concat());
-                        for extra in STRETCH_SAMPLES {
-                            guesses.push(time_scaled(&uq.u, uq.samples + extra));
-                        }
-                    }
-                }
-                let found = first_arriving(base, &e0, &guesses, band, max_samples, sqp_iterations)
-                    .map(|start| descend(base, &e0, start, band, sqp_iterations));
+                let found = search.ring_point(&plans, flat, r);
                 progress.tick();
                 (flat, found)
             })
             .collect();
         for (flat, plan) in solved {
-            plans[total - 1 - flat] = plan.as_ref().map(|p| MinTimePlan {
-                samples: p.samples,
-                u: p.u.iter().map(|v| -v).collect(),
-            });
-            plans[flat] = plan;
+            search.store(&mut plans, flat, plan);
         }
     }
     // One improvement sweep: the nonconvex descent leaves some points
     // slower than their neighbours; restart each point from every
     // neighbour's plan that is shorter than its own, stretched by one
     // sample. Reads only the previous sweep, so it is deterministic too.
-    progress.start("minimum-time plans, improvement sweep", half);
-    let improved: Vec<(usize, Option<MinTimePlan>)> = (0..half)
+    progress.start("minimum-time plans, improvement sweep", search.half());
+    let improved: Vec<(usize, Option<MinTimePlan>)> = (0..search.half())
         .into_par_iter()
         .map(|flat| {
-            let own = plans[flat].as_ref().map_or(max_samples + 1, |p| p.samples);
-            let p = offset(&unflatten(flat, &dims));
-            let mut guesses = Vec::new();
-            for n in 0..3usize.pow(m as u32) {
-                let d: Vec<i64> = (0..m)
-                    .map(|i| (n / 3usize.pow(i as u32) % 3) as i64 - 1)
-                    .collect();
-                let q: Vec<i64> = p.iter().zip(&d).map(|(a, b)| a + b).collect();
-                if let Some(Some(nb)) = flat_of_offset(&q).map(|f| &plans[f]) {
-                    if nb.samples + 1 < own && nb.samples > 0 {
-                        guesses.push(time_scaled(&nb.u, nb.samples + 1));
-                    }
-                }
-            }
-            let found = first_arriving(
-                base,
-                &e0_of(flat),
-                &guesses,
-                band,
-                max_samples,
-                sqp_iterations,
-            )
-            .map(|start| descend(base, &e0_of(flat), start, band, sqp_iterations))
-            .filter(|b| b.samples < own);
+            let found = search.improve_point(&plans, flat);
             progress.tick();
             (flat, found)
         })
         .collect();
     for (flat, plan) in improved {
-        if let Some(p) = plan {
-            plans[total - 1 - flat] = Some(MinTimePlan {
-                samples: p.samples,
-                u: p.u.iter().map(|v| -v).collect(),
-            });
-            plans[flat] = Some(p);
+        if plan.is_some() {
+            search.store(&mut plans, flat, plan);
         }
     }
     plans
+}
+
+/// The ring-by-ring search over one grid, split into its units of work: a
+/// point of a ring (reads the inner rings), and a point's improvement
+/// (reads every ring). Points are flat row-major indices over `axis`^M;
+/// only the first half (`0..half()`) is solved, the other half is its
+/// mirror image (see [`RingSearch::store`]).
+pub struct RingSearch<'s, 'a> {
+    pub base: &'s Ocp<'a>,
+    pub axis: &'s Axis,
+    pub band: Band,
+    pub max_samples: usize,
+    pub random_starts: usize,
+    pub sqp_iterations: usize,
+}
+
+impl RingSearch<'_, '_> {
+    fn m(&self) -> usize {
+        self.base.model.capsule_count()
+    }
+
+    fn dims(&self) -> Vec<usize> {
+        vec![self.axis.count; self.m()]
+    }
+
+    fn centre(&self) -> usize {
+        self.axis.count / 2
+    }
+
+    /// Points of the grid.
+    pub fn total(&self) -> usize {
+        self.dims().iter().product()
+    }
+
+    /// Points solved (the rest are mirror images); includes the centre.
+    pub fn half(&self) -> usize {
+        self.total().div_ceil(2)
+    }
+
+    /// Number of rings around the centre.
+    pub fn rings(&self) -> usize {
+        self.centre()
+    }
+
+    fn offset(&self, flat: usize) -> Vec<i64> {
+        let c = self.centre() as i64;
+        unflatten(flat, &self.dims())
+            .iter()
+            .map(|&i| i as i64 - c)
+            .collect()
+    }
+
+    fn ring_of_offset(o: &[i64]) -> usize {
+        o.iter()
+            .map(|v| v.unsigned_abs() as usize)
+            .max()
+            .unwrap_or(0)
+    }
+
+    fn flat_of_offset(&self, o: &[i64]) -> Option<usize> {
+        let c = self.centre() as i64;
+        let idx: Option<Vec<usize>> = o
+            .iter()
+            .map(|&v| {
+                let i = v + c;
+                (0..self.axis.count as i64)
+                    .contains(&i)
+                    .then_some(i as usize)
+            })
+            .collect();
+        idx.map(|i| flatten(&i, &self.dims()))
+    }
+
+    fn e0_of(&self, flat: usize) -> Vec<f64> {
+        unflatten(flat, &self.dims())
+            .iter()
+            .flat_map(|&i| [self.axis.value(i), 0.0])
+            .collect()
+    }
+
+    /// The state before the first ring: only the centre (an empty plan).
+    pub fn initial(&self) -> Vec<Option<MinTimePlan>> {
+        let mut plans = vec![None; self.total()];
+        let centre_flat = flatten(&vec![self.centre(); self.m()], &self.dims());
+        plans[centre_flat] = Some(MinTimePlan {
+            samples: 0,
+            u: Vec::new(),
+        });
+        plans
+    }
+
+    /// Points of ring `r` among the solved half, ascending.
+    pub fn ring_members(&self, r: usize) -> Vec<usize> {
+        (0..self.half())
+            .filter(|&f| Self::ring_of_offset(&self.offset(f)) == r)
+            .collect()
+    }
+
+    /// Stores `plan` at `flat` and its mirror image (minus the inputs) at
+    /// the opposite point.
+    pub fn store(&self, plans: &mut [Option<MinTimePlan>], flat: usize, plan: Option<MinTimePlan>) {
+        let total = plans.len();
+        plans[total - 1 - flat] = plan.as_ref().map(|p| MinTimePlan {
+            samples: p.samples,
+            u: p.u.iter().map(|v| -v).collect(),
+        });
+        plans[flat] = plan;
+    }
+
+    /// The plan of point `flat` of ring `r`, from the plans of the inner
+    /// rings in `plans`.
+    pub fn ring_point(
+        &self,
+        plans: &[Option<MinTimePlan>],
+        flat: usize,
+        r: usize,
+    ) -> Option<MinTimePlan> {
+        let base = self.base;
+        let m = self.m();
+        let e0 = self.e0_of(flat);
+        let mut guesses: Vec<Vec<f64>> = Vec::new();
+        if r == 1 {
+            guesses = starting_guesses(
+                flat as u64,
+                self.random_starts,
+                FIRST_RING_SAMPLES.min(self.max_samples),
+                base.model.u_max_t_per_m,
+            );
+        } else {
+            let p = self.offset(flat);
+            // Unit steps s toward the target: components 0 or sign(p_i).
+            for mask in 1..(1usize << m) {
+                let s: Vec<i64> = (0..m)
+                    .map(|i| if mask >> i & 1 == 1 { p[i].signum() } else { 0 })
+                    .collect();
+                if s.iter().all(|&v| v == 0) {
+                    continue;
+                }
+                let q: Vec<i64> = p.iter().zip(&s).map(|(a, b)| a - b).collect();
+                let (Some(qf), Some(sf)) = (self.flat_of_offset(&q), self.flat_of_offset(&s))
+                else {
+                    continue;
+                };
+                if Self::ring_of_offset(&q) >= r {
+                    continue;
+                }
+                let (Some(uq), Some(us)) = (&plans[qf], &plans[sf]) else {
+                    continue;
+                };
+                guesses.push([uq.u.as_slice(), us.u.as_slice()].concat());
+                guesses.push([us.u.as_slice(), uq.u.as_slice()].concat());
+                for extra in STRETCH_SAMPLES {
+                    guesses.push(time_scaled(&uq.u, uq.samples + extra));
+                }
+            }
+        }
+        first_arriving(
+            base,
+            &e0,
+            &guesses,
+            &self.band,
+            self.max_samples,
+            self.sqp_iterations,
+        )
+        .map(|start| descend(base, &e0, start, &self.band, self.sqp_iterations))
+    }
+
+    /// A shorter plan for point `flat` than the one in `plans` (the state
+    /// after every ring), restarted from each neighbour's shorter plan
+    /// stretched by one sample; None when none is shorter.
+    pub fn improve_point(&self, plans: &[Option<MinTimePlan>], flat: usize) -> Option<MinTimePlan> {
+        let m = self.m();
+        let own = plans[flat]
+            .as_ref()
+            .map_or(self.max_samples + 1, |p| p.samples);
+        let p = self.offset(flat);
+        let mut guesses = Vec::new();
+        for n in 0..3usize.pow(m as u32) {
+            let d: Vec<i64> = (0..m)
+                .map(|i| (n / 3usize.pow(i as u32) % 3) as i64 - 1)
+                .collect();
+            let q: Vec<i64> = p.iter().zip(&d).map(|(a, b)| a + b).collect();
+            if let Some(Some(nb)) = self.flat_of_offset(&q).map(|f| &plans[f]) {
+                if nb.samples + 1 < own && nb.samples > 0 {
+                    guesses.push(time_scaled(&nb.u, nb.samples + 1));
+                }
+            }
+        }
+        let e0 = self.e0_of(flat);
+        first_arriving(
+            self.base,
+            &e0,
+            &guesses,
+            &self.band,
+            self.max_samples,
+            self.sqp_iterations,
+        )
+        .map(|start| descend(self.base, &e0, start, &self.band, self.sqp_iterations))
+        .filter(|b| b.samples < own)
+    }
 }
 
 /// Horizon of the first ring's random starting guesses, samples (unit

@@ -11,8 +11,8 @@
 use crate::config::Config;
 use crate::legs::{build_leg_table, LegTable};
 use crate::mintime::{
-    arrival_sample, finish_at_rest, grid_min_time_plans, Band, FINE_PLAN_BAND, FINE_RANGE_M,
-    FINE_STEP_M, PLAN_BAND, SETTLE_BAND,
+    arrival_sample, finish_at_rest, grid_min_time_plans, MinTimePlan, RingSearch, FINE_PLAN_BAND,
+    FINE_RANGE_M, FINE_STEP_M, PLAN_BAND, SETTLE_BAND,
 };
 use crate::model::Model;
 use crate::ocp::{Ocp, Plan};
@@ -318,243 +318,353 @@ impl Progress for Silent {
     fn tick(&self) {}
 }
 
-/// Solves every grid plan (multi-start, then continuation from neighbours)
-/// and builds the warm-start index. Deterministic: same config, same bytes.
-pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
-    let model = Model::from_config(config);
-    let m = model.capsule_count();
-    let steps = config.controller.plan_steps;
-    let ocp = Ocp::from_config(&model, config, steps);
-    let grid = &config.grid;
-    let axis = Axis::symmetric(grid.position_range_m, grid.position_step_m);
-    let dims = vec![axis.count; m];
-    let e0_of = |flat: usize| -> Vec<f64> {
-        let idx = unflatten(flat, &dims);
-        idx.iter().flat_map(|&i| [axis.value(i), 0.0]).collect()
-    };
-    let plans = schedule_plans(&ocp, &axis, &PLAN_BAND, &e0_of, grid, progress);
-    // Constant sampling plays one sample, then tracks (u = 0) for the
-    // tracking time + delay: back-to-back plans, played that way, miss
-    // their targets by centimetres, so that schedule has plans of its own.
-    let coast_s = config.scanner.tracking_time_s + config.scanner.extra_delay_s;
-    let coasted_ocp = Ocp {
-        coast_s,
-        ..ocp.clone()
-    };
-    let coasted_plans = schedule_plans(&coasted_ocp, &axis, &PLAN_BAND, &e0_of, grid, progress);
-    // The end game: small moves from rest on a fine grid around the target.
-    let fine_axis = Axis::symmetric(FINE_RANGE_M, FINE_STEP_M);
-    let fine_dims = vec![fine_axis.count; m];
-    let fine_e0_of = |flat: usize| -> Vec<f64> {
-        unflatten(flat, &fine_dims)
-            .iter()
-            .flat_map(|&i| [fine_axis.value(i), 0.0])
-            .collect()
-    };
-    let inputs = |entries: Vec<PlanEntry>| -> Vec<Vec<f64>> {
-        entries.into_iter().map(|p| p.plan.u).collect()
-    };
-    let fine = FineTables {
-        plans: inputs(schedule_plans(
-            &ocp,
-            &fine_axis,
-            &FINE_PLAN_BAND,
-            &fine_e0_of,
-            grid,
-            progress,
-        )),
-        coasted_plans: inputs(schedule_plans(
-            &coasted_ocp,
-            &fine_axis,
-            &FINE_PLAN_BAND,
-            &fine_e0_of,
-            grid,
-            progress,
-        )),
-        axis: fine_axis,
-    };
+/// The four plan sets the tables hold, in the order they are built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PlanSet {
+    /// Back-to-back samples over the plan grid.
+    Main,
+    /// One sample, then the tracking coast, over the plan grid.
+    Coasted,
+    /// Back-to-back samples over the fine grid.
+    Fine,
+    /// The coasted schedule over the fine grid.
+    FineCoasted,
+}
 
-    let legs = build_leg_table(&axis, &plans, m, config.workspace.span_m());
-    let index_position_axis = Axis::symmetric(
-        INDEX_POSITION_MARGIN * grid.position_range_m,
-        grid.position_step_m,
-    );
-    let index_speed_axis = Axis::symmetric(INDEX_SPEED_RANGE_M_PER_S, INDEX_SPEED_STEP_M_PER_S);
-    let index = build_index(
-        &ocp,
-        &plans,
-        &index_position_axis,
-        &index_speed_axis,
-        progress,
-    );
-    let coasted_index = build_index(
-        &coasted_ocp,
-        &coasted_plans,
-        &index_position_axis,
-        &index_speed_axis,
-        progress,
-    );
-    Tables {
-        header: TableHeader {
-            magic: TABLE_MAGIC,
-            format_version: TABLE_FORMAT_VERSION,
-            config_hash: config_hash(config),
-            generator_version: env!("CARGO_PKG_VERSION").to_string(),
-        },
-        plan_steps: steps,
-        plan_axis: axis,
-        plans,
-        index_position_axis,
-        index_speed_axis,
-        index,
-        switching: switching_constants(config, &model),
-        legs,
-        coasted: CoastedTables {
-            coast_s,
-            plans: coasted_plans,
-            index: coasted_index,
-        },
-        fine,
+impl PlanSet {
+    pub const ALL: [PlanSet; 4] = [
+        PlanSet::Main,
+        PlanSet::Coasted,
+        PlanSet::Fine,
+        PlanSet::FineCoasted,
+    ];
+    /// The sets with a warm-start index.
+    pub const INDEXED: [PlanSet; 2] = [PlanSet::Main, PlanSet::Coasted];
+
+    pub fn position(self) -> usize {
+        self as usize
     }
 }
 
-/// Minimum-time plans over the grid for the schedule `ocp` models, padded
+/// Everything the plan sets and indexes are computed from: the problems of
+/// both schedules and the grids. Built the same way by the single-process
+/// path ([`build_tables`]) and by every shard (`crate::shard`).
+pub struct Problems<'a> {
+    pub config: &'a Config,
+    pub model: &'a Model,
+    pub ocp: Ocp<'a>,
+    pub coasted_ocp: Ocp<'a>,
+    pub axis: Axis,
+    pub fine_axis: Axis,
+    pub index_position_axis: Axis,
+    pub index_speed_axis: Axis,
+}
+
+impl<'a> Problems<'a> {
+    pub fn new(config: &'a Config, model: &'a Model) -> Problems<'a> {
+        let grid = &config.grid;
+        let ocp = Ocp::from_config(model, config, config.controller.plan_steps);
+        // Constant sampling plays one sample, then tracks (u = 0) for the
+        // tracking time + delay: back-to-back plans, played that way, miss
+        // their targets by centimetres, so that schedule has plans of its own.
+        let coast_s = config.scanner.tracking_time_s + config.scanner.extra_delay_s;
+        let coasted_ocp = Ocp {
+            coast_s,
+            ..ocp.clone()
+        };
+        Problems {
+            config,
+            model,
+            ocp,
+            coasted_ocp,
+            axis: Axis::symmetric(grid.position_range_m, grid.position_step_m),
+            // The end game: small moves from rest on a fine grid around the target.
+            fine_axis: Axis::symmetric(FINE_RANGE_M, FINE_STEP_M),
+            index_position_axis: Axis::symmetric(
+                INDEX_POSITION_MARGIN * grid.position_range_m,
+                grid.position_step_m,
+            ),
+            index_speed_axis: Axis::symmetric(INDEX_SPEED_RANGE_M_PER_S, INDEX_SPEED_STEP_M_PER_S),
+        }
+    }
+
+    pub fn ocp(&self, set: PlanSet) -> &Ocp<'a> {
+        match set {
+            PlanSet::Main | PlanSet::Fine => &self.ocp,
+            PlanSet::Coasted | PlanSet::FineCoasted => &self.coasted_ocp,
+        }
+    }
+
+    pub fn search(&self, set: PlanSet) -> RingSearch<'_, 'a> {
+        let (axis, band) = match set {
+            PlanSet::Main | PlanSet::Coasted => (&self.axis, PLAN_BAND),
+            PlanSet::Fine | PlanSet::FineCoasted => (&self.fine_axis, FINE_PLAN_BAND),
+        };
+        RingSearch {
+            base: self.ocp(set),
+            axis,
+            band,
+            max_samples: self.ocp.steps,
+            random_starts: self.config.grid.starts,
+            sqp_iterations: self.config.grid.sqp_iterations,
+        }
+    }
+
+    /// The stored entry of point `flat` of `set`, from its minimum-time
+    /// plan (finished at rest, padded to the plan length, rolled out).
+    pub fn plan_entry(&self, set: PlanSet, flat: usize, found: Option<&MinTimePlan>) -> PlanEntry {
+        let search = self.search(set);
+        let dims = vec![search.axis.count; self.model.capsule_count()];
+        let e0: Vec<f64> = unflatten(flat, &dims)
+            .iter()
+            .flat_map(|&i| [search.axis.value(i), 0.0])
+            .collect();
+        plan_entry(self.ocp(set), e0, found, self.config.grid.sqp_iterations)
+    }
+
+    /// The index builder of an indexed set over its finished plans.
+    pub fn index_builder<'p>(&'p self, set: PlanSet, plans: &'p [PlanEntry]) -> IndexBuilder<'p> {
+        IndexBuilder::new(
+            self.ocp(set),
+            plans,
+            &self.index_position_axis,
+            &self.index_speed_axis,
+        )
+    }
+
+    /// The tables from the four plan sets (in [`PlanSet::ALL`] order) and
+    /// the two indexes (in [`PlanSet::INDEXED`] order).
+    pub fn assemble(
+        &self,
+        plan_sets: [Vec<PlanEntry>; 4],
+        indexes: [Vec<(u16, u16)>; 2],
+    ) -> Tables {
+        let config = self.config;
+        let m = self.model.capsule_count();
+        let [plans, coasted_plans, fine_plans, fine_coasted_plans] = plan_sets;
+        let [index, coasted_index] = indexes;
+        let inputs = |entries: Vec<PlanEntry>| -> Vec<Vec<f64>> {
+            entries.into_iter().map(|p| p.plan.u).collect()
+        };
+        let legs = build_leg_table(&self.axis, &plans, m, config.workspace.span_m());
+        Tables {
+            header: TableHeader {
+                magic: TABLE_MAGIC,
+                format_version: TABLE_FORMAT_VERSION,
+                config_hash: config_hash(config),
+                generator_version: env!("CARGO_PKG_VERSION").to_string(),
+            },
+            plan_steps: self.ocp.steps,
+            plan_axis: self.axis.clone(),
+            plans,
+            index_position_axis: self.index_position_axis.clone(),
+            index_speed_axis: self.index_speed_axis.clone(),
+            index,
+            switching: switching_constants(config, self.model),
+            legs,
+            coasted: CoastedTables {
+                coast_s: self.coasted_ocp.coast_s,
+                plans: coasted_plans,
+                index: coasted_index,
+            },
+            fine: FineTables {
+                axis: self.fine_axis.clone(),
+                plans: inputs(fine_plans),
+                coasted_plans: inputs(fine_coasted_plans),
+            },
+        }
+    }
+}
+
+/// Solves every grid plan (multi-start, then continuation from neighbours)
+/// and builds the warm-start index. Deterministic: same config, same bytes.
+/// `crate::shard` computes the same phases split over processes.
+pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
+    let model = Model::from_config(config);
+    let problems = Problems::new(config, &model);
+    let plan_sets = PlanSet::ALL.map(|set| schedule_plans(&problems, set, progress));
+    let indexes = PlanSet::INDEXED.map(|set| {
+        build_index(
+            &problems.index_builder(set, &plan_sets[set.position()]),
+            progress,
+        )
+    });
+    problems.assemble(plan_sets, indexes)
+}
+
+/// Minimum-time plans over the grid of `set`, finished at rest and padded
 /// with zero gradient to the plan length, with their states and cost
 /// under the online cost.
-fn schedule_plans(
-    ocp: &Ocp,
-    axis: &Axis,
-    band: &Band,
-    e0_of: &(dyn Fn(usize) -> Vec<f64> + Sync),
-    grid: &crate::config::GridConfig,
-    progress: &dyn Progress,
-) -> Vec<PlanEntry> {
-    let steps = ocp.steps;
+fn schedule_plans(problems: &Problems, set: PlanSet, progress: &dyn Progress) -> Vec<PlanEntry> {
+    let s = problems.search(set);
     let min_time = grid_min_time_plans(
-        ocp,
-        axis,
-        band,
-        steps,
-        grid.starts,
-        grid.sqp_iterations,
+        s.base,
+        s.axis,
+        &s.band,
+        s.max_samples,
+        s.random_starts,
+        s.sqp_iterations,
         progress,
     );
+    min_time
+        .par_iter()
+        .enumerate()
+        .map(|(flat, found)| problems.plan_entry(set, flat, found.as_ref()))
+        .collect()
+}
+
+/// The stored entry for a start at rest at `e0` from its minimum-time plan
+/// `found` (None: not reached).
+fn plan_entry(
+    ocp: &Ocp,
+    e0: Vec<f64>,
+    found: Option<&MinTimePlan>,
+    sqp_iterations: usize,
+) -> PlanEntry {
+    let steps = ocp.steps;
     // Wall time per plan sample: the sample and the coast after it.
     let sample_period_s = ocp.dt_s + ocp.coast_s;
-    min_time
-        .into_par_iter()
-        .enumerate()
-        .map(|(flat, found)| {
-            let e0 = e0_of(flat);
-            let (reached, samples, arrival_states, mut u) = match found {
-                Some(p) => {
-                    let (states, _) = ocp.rollout(&e0, &p.u);
-                    let u = finish_at_rest(ocp, &e0, &p, steps, grid.sqp_iterations);
-                    (true, p.samples, states, u)
+    let (reached, samples, arrival_states, mut u) = match found {
+        Some(p) => {
+            let (states, _) = ocp.rollout(&e0, &p.u);
+            let u = finish_at_rest(ocp, &e0, p, steps, sqp_iterations);
+            (true, p.samples, states, u)
+        }
+        None => (false, 0, Vec::new(), Vec::new()),
+    };
+    u.resize(steps, 0.0);
+    let (states, cost) = ocp.rollout(&e0, &u);
+    // The bound is the minimum-time plan's own arrival, before the
+    // finishing samples.
+    let min_time_s = match reached {
+        true => settle_time_s(&arrival_states, sample_period_s),
+        false => f64::INFINITY,
+    };
+    PlanEntry {
+        e0,
+        plan: Plan {
+            u,
+            states,
+            cost,
+            iterations: 0,
+        },
+        reached,
+        arrival_samples: samples,
+        min_time_s,
+    }
+}
+
+/// Per-cell warm-start choice over the index grid (row-major over
+/// [e1, v1, e2, v2, ...]): every cell is independent of the others.
+pub struct IndexBuilder<'p> {
+    ocp: &'p Ocp<'p>,
+    plans: &'p [PlanEntry],
+    pos: &'p Axis,
+    spd: &'p Axis,
+    dims: Vec<usize>,
+    scale: Vec<f64>,
+    /// Samples of the reached plans: (plan, step, state).
+    samples: Vec<(u16, u16, &'p [f64])>,
+}
+
+impl<'p> IndexBuilder<'p> {
+    pub fn new(ocp: &'p Ocp<'p>, plans: &'p [PlanEntry], pos: &'p Axis, spd: &'p Axis) -> Self {
+        let m = ocp.model.capsule_count();
+        let steps = ocp.steps;
+        let dims: Vec<usize> = (0..2 * m)
+            .map(|j| if j % 2 == 0 { pos.count } else { spd.count })
+            .collect();
+        // Only reached plans are warm-start material.
+        let samples: Vec<(u16, u16, &[f64])> = plans
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.reached)
+            .flat_map(|(pi, p)| {
+                p.plan.states[..steps]
+                    .iter()
+                    .enumerate()
+                    .map(move |(k, s)| (pi as u16, k as u16, s.as_slice()))
+            })
+            .collect();
+        let scale: Vec<f64> = (0..2 * m)
+            .map(|j| if j % 2 == 0 { pos.step } else { spd.step })
+            .collect();
+        IndexBuilder {
+            ocp,
+            plans,
+            pos,
+            spd,
+            dims,
+            scale,
+            samples,
+        }
+    }
+
+    /// Number of cells.
+    pub fn cells(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    /// The stored plan sample whose tail, rolled out from the centre of
+    /// cell `flat`, has the lowest cost among the nearest candidates
+    /// ((u16::MAX, 0) without any).
+    pub fn cell(&self, flat: usize) -> (u16, u16) {
+        let (pos, spd, steps) = (self.pos, self.spd, self.ocp.steps);
+        let idx = unflatten(flat, &self.dims);
+        let centre: Vec<f64> = idx
+            .iter()
+            .enumerate()
+            .map(|(j, &i)| {
+                if j % 2 == 0 {
+                    pos.value(i)
+                } else {
+                    spd.value(i)
                 }
-                None => (false, 0, Vec::new(), Vec::new()),
-            };
-            u.resize(steps, 0.0);
-            let (states, cost) = ocp.rollout(&e0, &u);
-            // The bound is the minimum-time plan's own arrival, before the
-            // finishing samples.
-            let min_time_s = match reached {
-                true => settle_time_s(&arrival_states, sample_period_s),
-                false => f64::INFINITY,
-            };
-            PlanEntry {
-                e0,
-                plan: Plan {
-                    u,
-                    states,
-                    cost,
-                    iterations: 0,
-                },
-                reached,
-                arrival_samples: samples,
-                min_time_s,
-            }
-        })
-        .collect()
+            })
+            .collect();
+        let mut near: Vec<(f64, usize)> = self
+            .samples
+            .iter()
+            .enumerate()
+            .map(|(si, (_, _, s))| {
+                let d: f64 = (0..self.dims.len())
+                    .map(|j| ((s[j] - centre[j]) / self.scale[j]).powi(2))
+                    .sum();
+                (d, si)
+            })
+            .collect();
+        let keep = INDEX_CANDIDATES.min(near.len());
+        if keep == 0 {
+            return (u16::MAX, 0);
+        }
+        near.select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        near.truncate(keep);
+        near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let best = near
+            .iter()
+            .map(|&(_, si)| {
+                let (pi, k, _) = self.samples[si];
+                let plan = &self.plans[pi as usize].plan;
+                let mut tail = vec![0.0; steps];
+                tail[..steps - k as usize].copy_from_slice(&plan.u[k as usize..]);
+                (self.ocp.rollout(&centre, &tail).1, pi, k)
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .expect("non-empty");
+        (best.1, best.2)
+    }
 }
 
 /// For every index cell, the stored plan sample whose tail, rolled out from
 /// the cell centre, has the lowest cost among the nearest candidates.
-fn build_index(
-    ocp: &Ocp,
-    plans: &[PlanEntry],
-    pos: &Axis,
-    spd: &Axis,
-    progress: &dyn Progress,
-) -> Vec<(u16, u16)> {
-    let m = ocp.model.capsule_count();
-    let steps = ocp.steps;
-    let dims: Vec<usize> = (0..2 * m)
-        .map(|j| if j % 2 == 0 { pos.count } else { spd.count })
-        .collect();
-    let cells: usize = dims.iter().product();
-    // Only reached plans are warm-start material.
-    let samples: Vec<(u16, u16, &[f64])> = plans
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| p.reached)
-        .flat_map(|(pi, p)| {
-            p.plan.states[..steps]
-                .iter()
-                .enumerate()
-                .map(move |(k, s)| (pi as u16, k as u16, s.as_slice()))
-        })
-        .collect();
-    let scale: Vec<f64> = (0..2 * m)
-        .map(|j| if j % 2 == 0 { pos.step } else { spd.step })
-        .collect();
-    progress.start("warm-start index", cells);
-    (0..cells)
+fn build_index(builder: &IndexBuilder, progress: &dyn Progress) -> Vec<(u16, u16)> {
+    progress.start("warm-start index", builder.cells());
+    (0..builder.cells())
         .into_par_iter()
         .map(|flat| {
-            let idx = unflatten(flat, &dims);
-            let centre: Vec<f64> = idx
-                .iter()
-                .enumerate()
-                .map(|(j, &i)| {
-                    if j % 2 == 0 {
-                        pos.value(i)
-                    } else {
-                        spd.value(i)
-                    }
-                })
-                .collect();
-            let mut near: Vec<(f64, usize)> = samples
-                .iter()
-                .enumerate()
-                .map(|(si, (_, _, s))| {
-                    let d: f64 = (0..2 * m)
-                        .map(|j| ((s[j] - centre[j]) / scale[j]).powi(2))
-                        .sum();
-                    (d, si)
-                })
-                .collect();
-            let keep = INDEX_CANDIDATES.min(near.len());
-            if keep == 0 {
-                progress.tick();
-                return (u16::MAX, 0);
-            }
-            near.select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            near.truncate(keep);
-            near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            let best = near
-                .iter()
-                .map(|&(_, si)| {
-                    let (pi, k, _) = samples[si];
-                    let plan = &plans[pi as usize].plan;
-                    let mut tail = vec![0.0; steps];
-                    tail[..steps - k as usize].copy_from_slice(&plan.u[k as usize..]);
-                    (ocp.rollout(&centre, &tail).1, pi, k)
-                })
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-                .expect("non-empty");
+            let cell = builder.cell(flat);
             progress.tick();
-            (best.1, best.2)
+            cell
         })
         .collect()
 }
