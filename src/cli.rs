@@ -298,16 +298,38 @@ pub struct GenerateArgs {
     /// Config file (TOML); the embedded paper config when absent.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// Output directory of the generated crate.
-    #[arg(long, value_name = "DIR", default_value = "generated")]
-    pub out: PathBuf,
+    /// Output directory of the generated crate (default `generated`); with
+    /// `--shard`, the part file to write.
+    #[arg(long, value_name = "DIR|PART")]
+    pub out: Option<PathBuf>,
     /// Do not write: fail if the output differs from what would be generated.
     #[arg(long)]
     pub check: bool,
 
     /// Re-emit from the tables already in `--out` (they must match the config).
-    #[arg(long)]
+    #[arg(long, conflicts_with_all = ["shard", "merge", "rounds"])]
     pub reuse_tables: bool,
+
+    /// Sharded generation: compute shard I (from 0) of N of round `--round`
+    /// and write it to `--out PART`; the positional PARTs are the parts of
+    /// every earlier round.
+    #[arg(long, value_name = "I/N", requires = "round", conflicts_with_all = ["merge", "rounds", "check"])]
+    pub shard: Option<String>,
+    /// The round a `--shard` computes (0 .. `--rounds` - 1).
+    #[arg(long, value_name = "R", requires = "shard")]
+    pub round: Option<usize>,
+    /// Assemble the tables from the parts of every round (the positional
+    /// PARTs) and emit the crate into `--out` as a plain run does (or, with
+    /// `--check`, compare).
+    #[arg(long, conflicts_with = "rounds")]
+    pub merge: bool,
+    /// Print the number of rounds of sharded generation for the config
+    /// (stdout) and what each computes (stderr), then exit.
+    #[arg(long)]
+    pub rounds: bool,
+    /// Part files, for `--shard` (earlier rounds) and `--merge` (all rounds).
+    #[arg(value_name = "PART")]
+    pub parts: Vec<PathBuf>,
 }
 
 #[derive(Debug, Clone, Args)]

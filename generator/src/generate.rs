@@ -131,21 +131,29 @@ pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, Gener
 /// so an interrupted run never leaves a half-written file.
 pub fn write_atomically(dir: &Path, files: &GeneratedFiles) -> Result<(), GenerateError> {
     for (rel, bytes) in &files.files {
-        let path = dir.join(rel);
-        let parent = path.parent().unwrap_or(dir);
-        std::fs::create_dir_all(parent).map_err(|e| io_err(parent, e))?;
-        let tmp = parent.join(format!(
-            ".{}.tmp-{}",
-            rel.file_name().and_then(|n| n.to_str()).unwrap_or("file"),
-            std::process::id()
-        ));
-        std::fs::write(&tmp, bytes).map_err(|e| io_err(&tmp, e))?;
-        std::fs::rename(&tmp, &path).map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            io_err(&path, e)
-        })?;
+        write_file_atomically(&dir.join(rel), bytes)?;
     }
     Ok(())
+}
+
+/// Writes `bytes` to `path` via a temporary file in the same directory and
+/// a rename (creating the directory if needed).
+pub fn write_file_atomically(path: &Path, bytes: &[u8]) -> Result<(), GenerateError> {
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(parent).map_err(|e| io_err(parent, e))?;
+    let tmp = parent.join(format!(
+        ".{}.tmp-{}",
+        path.file_name().and_then(|n| n.to_str()).unwrap_or("file"),
+        std::process::id()
+    ));
+    std::fs::write(&tmp, bytes).map_err(|e| io_err(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        io_err(path, e)
+    })
 }
 
 /// Relative paths whose committed content differs from `files` (or is missing).

@@ -12,4 +12,5 @@ pub mod legs;
 pub mod mintime;
 pub mod model;
 pub mod ocp;
+pub mod shard;
 pub mod tables;

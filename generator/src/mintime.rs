@@ -113,6 +113,16 @@ pub struct MinTimePlan {
     pub u: Vec<f64>,
 }
 
+impl MinTimePlan {
+    /// The plan from the opposite start (minus the inputs).
+    pub fn mirrored(&self) -> MinTimePlan {
+        MinTimePlan {
+            samples: self.samples,
+            u: self.u.iter().map(|v| -v).collect(),
+        }
+    }
+}
+
 /// The feasibility problem over `steps` samples (see the module docs).
 pub fn reach_ocp<'a>(base: &Ocp<'a>, steps: usize, band: &Band) -> Ocp<'a> {
     let nx = base.model.state_count();
@@ -363,10 +373,7 @@ impl RingSearch<'_, '_> {
     /// the opposite point.
     pub fn store(&self, plans: &mut [Option<MinTimePlan>], flat: usize, plan: Option<MinTimePlan>) {
         let total = plans.len();
-        plans[total - 1 - flat] = plan.as_ref().map(|p| MinTimePlan {
-            samples: p.samples,
-            u: p.u.iter().map(|v| -v).collect(),
-        });
+        plans[total - 1 - flat] = plan.as_ref().map(MinTimePlan::mirrored);
         plans[flat] = plan;
     }
 

@@ -4,6 +4,8 @@
 use crate::cli::{load_config, GenerateArgs};
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::generate::{differences, emit_all, generate, write_atomically};
+use capsule_mpc_generator::model::Model;
+use capsule_mpc_generator::shard::{compute_shard, merge_parts, ShardSpec, Sharding};
 use capsule_mpc_generator::tables::{Progress, Tables};
 use capsule_mpc_sim::qp_map;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -45,8 +47,46 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
     let config = load_config(args.config.as_deref())?;
     let started = Instant::now();
     let bar = Bar(Mutex::new(None));
-    let mut files = if args.reuse_tables && !args.check {
-        let path = args.out.join("tables.bin");
+    if args.rounds {
+        let model = Model::from_config(&config);
+        let sharding = Sharding::new(&config, &model);
+        for r in 0..sharding.rounds().len() {
+            eprintln!("{}", sharding.describe(r)?);
+        }
+        println!("{}", sharding.rounds().len());
+        return Ok(());
+    }
+    if !args.parts.is_empty() && args.shard.is_none() && !args.merge {
+        bail!(
+            "part files were given ({}, ...) without --shard or --merge",
+            args.parts[0].display()
+        );
+    }
+    if let Some(spec) = &args.shard {
+        let shard: ShardSpec = spec.parse()?;
+        let round = args.round.context("--shard needs --round R")?;
+        let Some(out) = &args.out else {
+            bail!("--shard {spec} needs --out PART, the part file to write");
+        };
+        let part = compute_shard(&config, round, shard, &args.parts, &bar)?;
+        bar.finish();
+        part.write(out)?;
+        println!(
+            "round {round}, shard {shard}: {} units in {:.1} s, wrote {}",
+            part.units.len(),
+            started.elapsed().as_secs_f64(),
+            out.display()
+        );
+        return Ok(());
+    }
+    let out_dir = args.out.clone().unwrap_or_else(|| "generated".into());
+    let mut files = if args.merge {
+        if args.parts.is_empty() {
+            bail!("--merge needs the part files of every round");
+        }
+        emit_all(&config, merge_parts(&config, &args.parts)?)?
+    } else if args.reuse_tables && !args.check {
+        let path = out_dir.join("tables.bin");
         let tables = Tables::read(&path, &config).context("--reuse-tables")?;
         emit_all(&config, tables)?
     } else {
@@ -68,25 +108,25 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         .find(|(p, _)| p.ends_with("tables.bin"))
         .map_or(0, |(_, b)| b.len());
     if args.check {
-        let diff = differences(&args.out, &files);
+        let diff = differences(&out_dir, &files);
         if !diff.is_empty() {
             let names: Vec<String> = diff.iter().map(|p| p.display().to_string()).collect();
             bail!(
                 "{} differs from a fresh generation: {} (run `capsule-mpc generate`)",
-                args.out.display(),
+                out_dir.display(),
                 names.join(", ")
             );
         }
         println!(
             "{} matches a fresh generation ({elapsed:.1} s)",
-            args.out.display()
+            out_dir.display()
         );
         return Ok(());
     }
-    write_atomically(&args.out, &files)?;
+    write_atomically(&out_dir, &files)?;
     println!(
         "generated {} in {elapsed:.1} s: {} plans ({} reach their target), {} index cells, tables.bin {} bytes",
-        args.out.display(),
+        out_dir.display(),
         t.plans.len(),
         t.reached_count(),
         t.index.len(),
