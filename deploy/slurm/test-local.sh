@@ -196,5 +196,18 @@ for n in "${counts[@]}"; do
         exit 1
     fi
     cmp "$run/single/tables.bin" "$run/merged-$n/tables.bin"
+    # Per round: units computed and the slowest shard's time (from the logs).
+    cat "$work"/logs/round-*-shard-*.out | awk '
+        /^round [0-9]+, shard/ {
+            r = $2 + 0; sub(/:$/, "", $4); u[r] += $5; t = $(NF - 3) + 0
+            if (t > m[r]) m[r] = t; s[r] += t; if (r > last) last = r
+        }
+        END {
+            for (r = 0; r <= last; r++) {
+                printf "  round %d: %d units, slowest shard %.1f s, all shards %.1f s\n", r, u[r], m[r], s[r]
+                tm += m[r]; ts += s[r]
+            }
+            printf "  rounds: slowest shards sum to %.1f s, compute %.1f CPU-s\n", tm, ts
+        }'
     echo "ok: $n shard(s) merged byte-identical to the single-process run ($(stat -c %s "$run/merged-$n/tables.bin") bytes of tables)"
 done

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Sharded table generation on Kubernetes: one Indexed Job per round (each
+# waits for the previous to complete; Kubernetes has no job dependencies),
+# then the merge Job. Needs kubectl pointed at the cluster, the image pushed
+# where the cluster can pull it, and a ReadWriteMany storage class.
+#
+#   deploy/k8s/run.sh CONFIG IMAGE SHARDS [CPUS_PER_SHARD] [PARALLELISM]
+#
+# e.g. deploy/k8s/run.sh configs/paper.toml registry.example.org/capsule-mpc:1 100 32
+# The merged crate ends up in /work/generated on the capsule-work volume.
+set -euo pipefail
+if [ $# -lt 3 ]; then
+    sed -n '2,10p' "$0" >&2
+    exit 2
+fi
+here=$(cd "$(dirname "$0")" && pwd)
+config=$1 image=$2 shards=$3 cpus=${4:-1} parallelism=${5:-$3}
+timeout=${CAPSULE_K8S_ROUND_TIMEOUT:-24h}
+kubectl apply -f "$here/volume.yaml"
+kubectl create configmap capsule-config --from-file=config.toml="$config" \
+    --dry-run=client -o yaml | kubectl apply -f -
+# The round count (the config and the generator version decide it): from a
+# local build if there is one, else from the image.
+bin=${CAPSULE_BIN:-$here/../../target/release/capsule-mpc}
+if [ -x "$bin" ]; then
+    rounds=$("$bin" generate --config "$config" --rounds 2>/dev/null)
+else
+    rounds=$(docker run --rm -v "$(cd "$(dirname "$config")" && pwd):/c:ro" "$image" \
+        generate --config "/c/$(basename "$config")" --rounds 2>/dev/null)
+fi
+echo "$rounds rounds of $shards shards"
+render() {
+    sed -e "s|__ROUND__|$1|g" -e "s|__SHARDS__|$shards|g" -e "s|__PARALLELISM__|$parallelism|g" \
+        -e "s|__CPUS__|$cpus|g" -e "s|__IMAGE__|$image|g" "$2"
+}
+for ((r = 0; r < rounds; r++)); do
+    kubectl delete job "capsule-round-$r" --ignore-not-found
+    render "$r" "$here/shard-job.yaml" | kubectl apply -f -
+    kubectl wait --for=condition=complete "job/capsule-round-$r" --timeout="$timeout"
+done
+kubectl delete job capsule-merge --ignore-not-found
+render 0 "$here/merge-job.yaml" | kubectl apply -f -
+kubectl wait --for=condition=complete job/capsule-merge --timeout="$timeout"
+kubectl logs job/capsule-merge
