@@ -28,6 +28,7 @@ fn run_round(config: &Config, r: usize, n: usize, inputs: &[PathBuf], dir: &Path
             let path = dir.join(format!("r{r}-s{i}-of-{n}.part"));
             compute_shard(config, r, shard(i, n), inputs, &Silent)
                 .unwrap()
+                .part
                 .write(&path)
                 .unwrap();
             path
@@ -73,7 +74,8 @@ fn round_zero(config: &Config, n: usize, dir: &Path) -> Vec<PathBuf> {
 
 fn err(config: &Config, round: usize, inputs: &[PathBuf]) -> String {
     compute_shard(config, round, shard(0, 1), inputs, &Silent)
-        .unwrap_err()
+        .err()
+        .expect("refused")
         .to_string()
 }
 

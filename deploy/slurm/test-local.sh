@@ -70,6 +70,7 @@ run=$(mktemp -d /tmp/capsule-slurm.XXXXXX)
 pids=()
 cleanup() {
     status=$?
+    trap - EXIT INT TERM
     set +e
     if [ -n "${SLURM_CONF:-}" ] && [ -f "$SLURM_CONF" ]; then
         scancel --quiet -u "$(id -un)" >/dev/null 2>&1
@@ -199,15 +200,17 @@ for n in "${counts[@]}"; do
     # Per round: units computed and the slowest shard's time (from the logs).
     cat "$work"/logs/round-*-shard-*.out | awk '
         /^round [0-9]+, shard/ {
-            r = $2 + 0; sub(/:$/, "", $4); u[r] += $5; t = $(NF - 3) + 0
-            if (t > m[r]) m[r] = t; s[r] += t; if (r > last) last = r
+            r = $2 + 0; u[r] += $5; if (r > last) last = r
+            t = $0; sub(/.* units in /, "", t); t += 0
+            w = $0; sub(/.*slowest /, "", w); w += 0
+            if (t > m[r]) m[r] = t; s[r] += t; if (w > x[r]) x[r] = w
         }
         END {
             for (r = 0; r <= last; r++) {
-                printf "  round %d: %d units, slowest shard %.1f s, all shards %.1f s\n", r, u[r], m[r], s[r]
+                printf "  round %d: %5d units, slowest shard %6.1f s, all shards %6.1f s, slowest unit %5.2f s\n", r, u[r], m[r], s[r], x[r]
                 tm += m[r]; ts += s[r]
             }
-            printf "  rounds: slowest shards sum to %.1f s, compute %.1f CPU-s\n", tm, ts
+            printf "  rounds: slowest shards sum to %.1f s, all shards %.1f s\n", tm, ts
         }'
     echo "ok: $n shard(s) merged byte-identical to the single-process run ($(stat -c %s "$run/merged-$n/tables.bin") bytes of tables)"
 done

@@ -294,43 +294,54 @@ impl<'a> Sharding<'a> {
         (p.index_position_axis.count * p.index_speed_axis.count).pow(p.model.capsule_count() as u32)
     }
 
-    /// Every unit of round `r`, in the fixed order shards are dealt from.
-    pub fn units(&self, r: usize) -> Result<Vec<Unit>, ShardError> {
+    /// Every unit of round `r`, in the fixed order shards are dealt from
+    /// (lazily: a dense index round has (positions x speeds)^M cells).
+    pub fn units(&self, r: usize) -> Result<Box<dyn Iterator<Item = Unit> + '_>, ShardError> {
         let unit = |set, item: usize| Unit {
             set,
             item: u32::try_from(item).expect("unit index fits u32"),
         };
         Ok(match self.round(r)? {
-            Round::Ring(ring) => PlanSet::ALL
-                .iter()
-                .flat_map(|&set| {
-                    let s = self.problems.search(set);
-                    let members = if ring <= s.rings() {
-                        s.ring_members(ring)
-                    } else {
-                        Vec::new()
-                    };
-                    members.into_iter().map(move |f| unit(set, f))
-                })
-                .collect(),
+            Round::Ring(ring) => Box::new(PlanSet::ALL.into_iter().flat_map(move |set| {
+                let s = self.problems.search(set);
+                let members = if ring <= s.rings() {
+                    s.ring_members(ring)
+                } else {
+                    Vec::new()
+                };
+                members.into_iter().map(move |f| unit(set, f))
+            })),
+            Round::Finish => Box::new(PlanSet::ALL.into_iter().flat_map(move |set| {
+                (0..self.problems.search(set).half()).map(move |f| unit(set, f))
+            })),
+            Round::Index => Box::new(
+                PlanSet::INDEXED
+                    .into_iter()
+                    .flat_map(move |set| (0..self.index_cells()).map(move |c| unit(set, c))),
+            ),
+        })
+    }
+
+    /// Number of units of round `r`.
+    pub fn unit_count(&self, r: usize) -> Result<usize, ShardError> {
+        Ok(match self.round(r)? {
+            Round::Index => PlanSet::INDEXED.len() * self.index_cells(),
             Round::Finish => PlanSet::ALL
                 .iter()
-                .flat_map(|&set| (0..self.problems.search(set).half()).map(move |f| unit(set, f)))
-                .collect(),
-            Round::Index => PlanSet::INDEXED
-                .iter()
-                .flat_map(|&set| (0..self.index_cells()).map(move |c| unit(set, c)))
-                .collect(),
+                .map(|&s| self.problems.search(s).half())
+                .sum(),
+            Round::Ring(_) => self.units(r)?.count(),
         })
     }
 
     /// A one-line description of round `r` for logs and `--rounds`.
     pub fn describe(&self, r: usize) -> Result<String, ShardError> {
-        let units = self.units(r)?.len();
+        let units = self.unit_count(r)?;
         Ok(match self.round(r)? {
             Round::Ring(ring) => format!("round {r}: ring {ring} of the plan grids, {units} plans"),
             Round::Finish => format!(
-                "round {r}: improvement sweep and finishing at rest, {units} plans (with mirrors)"
+                "round {r}: improvement sweep and finishing at rest, {units} points (each also \
+                 finishes its mirror image)"
             ),
             Round::Index => format!("round {r}: warm-start index, {units} cells"),
         })
@@ -339,7 +350,6 @@ impl<'a> Sharding<'a> {
     fn assigned(&self, r: usize, shard: ShardSpec) -> Result<Vec<Unit>, ShardError> {
         Ok(self
             .units(r)?
-            .into_iter()
             .skip(shard.index)
             .step_by(shard.count)
             .collect())
@@ -529,7 +539,7 @@ impl<'a> Sharding<'a> {
         shard: ShardSpec,
         inputs: &[PathBuf],
         progress: &dyn Progress,
-    ) -> Result<Part, ShardError> {
+    ) -> Result<ShardRun, ShardError> {
         let round = self.round(r)?;
         let state = self.load(inputs, r)?;
         let units = self.assigned(r, shard)?;
@@ -550,9 +560,10 @@ impl<'a> Sharding<'a> {
             .zip(&finished)
             .map(|(&s, plans)| p.index_builder(s, plans))
             .collect();
-        let outputs: Vec<Output> = units
+        let timed: Vec<(Output, f64)> = units
             .par_iter()
             .map(|unit| {
+                let started = std::time::Instant::now();
                 let (set, item) = (unit.set, unit.item as usize);
                 let search = p.search(set);
                 let plans = &state.min_time[set.position()];
@@ -575,11 +586,12 @@ impl<'a> Sharding<'a> {
                     Round::Index => Output::Cell(builders[indexed_position(set)].cell(item)),
                 };
                 progress.tick();
-                out
+                (out, started.elapsed().as_secs_f64())
             })
             .collect();
+        let (outputs, unit_seconds): (Vec<Output>, Vec<f64>) = timed.into_iter().unzip();
         let config = p.config;
-        Ok(Part {
+        let part = Part {
             header: PartHeader {
                 magic: PART_MAGIC,
                 part_format_version: PART_FORMAT_VERSION,
@@ -593,7 +605,8 @@ impl<'a> Sharding<'a> {
             },
             units,
             outputs,
-        })
+        };
+        Ok(ShardRun { part, unit_seconds })
     }
 
     /// The tables from the parts of every round: byte-identical to
@@ -624,6 +637,13 @@ pub fn round_count(config: &Config) -> usize {
     Sharding::new(config, &model).rounds().len()
 }
 
+/// A computed shard: the part to write, and the wall time of each of its
+/// units (for scaling reports; not stored, so parts stay deterministic).
+pub struct ShardRun {
+    pub part: Part,
+    pub unit_seconds: Vec<f64>,
+}
+
 /// Computes shard `shard` of round `round` (see [`Sharding::compute`]).
 pub fn compute_shard(
     config: &Config,
@@ -631,7 +651,7 @@ pub fn compute_shard(
     shard: ShardSpec,
     inputs: &[PathBuf],
     progress: &dyn Progress,
-) -> Result<Part, ShardError> {
+) -> Result<ShardRun, ShardError> {
     let model = Model::from_config(config);
     Sharding::new(config, &model).compute(round, shard, inputs, progress)
 }

@@ -68,12 +68,15 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         let Some(out) = &args.out else {
             bail!("--shard {spec} needs --out PART, the part file to write");
         };
-        let part = compute_shard(&config, round, shard, &args.parts, &bar)?;
+        let run = compute_shard(&config, round, shard, &args.parts, &bar)?;
         bar.finish();
-        part.write(out)?;
+        run.part.write(out)?;
+        let slowest = run.unit_seconds.iter().copied().fold(0.0, f64::max);
+        let busy: f64 = run.unit_seconds.iter().sum();
         println!(
-            "round {round}, shard {shard}: {} units in {:.1} s, wrote {}",
-            part.units.len(),
+            "round {round}, shard {shard}: {} units in {:.1} s (unit times: sum {busy:.1} s, \
+             slowest {slowest:.2} s), wrote {}",
+            run.unit_seconds.len(),
             started.elapsed().as_secs_f64(),
             out.display()
         );
