@@ -129,7 +129,13 @@ fn incomplete_duplicate_and_mismatched_parts_are_refused() {
     // A part of the round being computed (or later).
     let e = err(&config, 0, &halves);
     assert!(
-        e.contains("is from round 0") && e.contains("round 0 reads only earlier rounds"),
+        e.contains("is from round 0") && e.contains("round 0 reads no parts"),
+        "{e}"
+    );
+    let round_one = run_round(&config, 1, 1, &halves, dir.path());
+    let e = err(&config, 1, &[halves.clone(), round_one].concat());
+    assert!(
+        e.contains("is from round 1") && e.contains("round 1 reads only the parts of rounds 0..0"),
         "{e}"
     );
     // A merge without the later rounds.

@@ -395,13 +395,15 @@ impl<'a> Sharding<'a> {
                 return Err(part_err(
                     path,
                     format!(
-                        "is from round {r}, but {} (given parts must be from rounds 0..{})",
-                        if upto == rounds {
-                            "there is no such round".to_string()
-                        } else {
-                            format!("round {upto} reads only earlier rounds")
-                        },
-                        upto.saturating_sub(1)
+                        "is from round {r}, but {}",
+                        match upto {
+                            0 => "round 0 reads no parts".to_string(),
+                            _ if upto == rounds => format!("the rounds are 0..{}", rounds - 1),
+                            _ => format!(
+                                "round {upto} reads only the parts of rounds 0..{}",
+                                upto - 1
+                            ),
+                        }
                     ),
                 ));
             }
