@@ -15,7 +15,27 @@ if [ $# -lt 3 ]; then
 fi
 here=$(cd "$(dirname "$0")" && pwd)
 config=$1 image=$2 shards=$3 cpus=${4:-1} parallelism=${5:-$3}
-timeout=${CAPSULE_K8S_ROUND_TIMEOUT:-24h}
+timeout_s=${CAPSULE_K8S_ROUND_TIMEOUT_S:-86400}
+# Waits until job $1 is Complete; fails as soon as it is Failed (an index
+# out of retries), or after timeout_s.
+wait_job() {
+    local deadline=$(($(date +%s) + timeout_s)) state
+    while :; do
+        state=$(kubectl get job "$1" -o jsonpath='{.status.conditions[?(@.status=="True")].type}')
+        case " $state " in
+            *" Complete "*) return 0 ;;
+            *" Failed "*)
+                echo "job $1 failed:" >&2
+                kubectl describe job "$1" | tail -n 20 >&2
+                return 1 ;;
+        esac
+        if [ "$(date +%s)" -gt "$deadline" ]; then
+            echo "job $1: timed out after ${timeout_s} s" >&2
+            return 1
+        fi
+        sleep 5
+    done
+}
 kubectl apply -f "$here/volume.yaml"
 kubectl create configmap capsule-config --from-file=config.toml="$config" \
     --dry-run=client -o yaml | kubectl apply -f -
@@ -36,9 +56,9 @@ render() {
 for ((r = 0; r < rounds; r++)); do
     kubectl delete job "capsule-round-$r" --ignore-not-found
     render "$r" "$here/shard-job.yaml" | kubectl apply -f -
-    kubectl wait --for=condition=complete "job/capsule-round-$r" --timeout="$timeout"
+    wait_job "capsule-round-$r"
 done
 kubectl delete job capsule-merge --ignore-not-found
 render 0 "$here/merge-job.yaml" | kubectl apply -f -
-kubectl wait --for=condition=complete job/capsule-merge --timeout="$timeout"
+wait_job capsule-merge
 kubectl logs job/capsule-merge
