@@ -57,7 +57,14 @@ fn assert_merge_matches(config: &Config) {
 
 #[test]
 fn merged_tables_match_the_single_process_run_for_two_capsules() {
-    assert_merge_matches(&config("shard-m2.toml"));
+    let config = config("shard-m2.toml");
+    assert_merge_matches(&config);
+    // Each round may use its own shard count.
+    let single = build_tables(&config, &Silent).to_bytes();
+    assert!(
+        sharded_bytes(&config, |r| 1 + r % 4) == single,
+        "mixed shard counts"
+    );
 }
 
 #[test]
