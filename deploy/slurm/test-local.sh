@@ -115,7 +115,7 @@ for _ in $(seq 100); do [ -S "$run/munge.socket" ] && break; sleep 0.1; done
 
 cat >"$run/slurm.conf" <<CONF
 ClusterName=capsule-local
-SlurmctldHost=$host
+SlurmctldHost=$host(127.0.0.1)
 SlurmctldPort=$port
 SlurmdPort=$((port + 1))
 SlurmUser=root
@@ -140,7 +140,7 @@ SlurmctldPidFile=$run/slurmctld.pid
 SlurmdPidFile=$run/slurmd.pid
 SlurmctldLogFile=$run/slurmctld.log
 SlurmdLogFile=$run/slurmd.log
-NodeName=$host CPUs=$cpus State=UNKNOWN
+NodeName=$host NodeAddr=127.0.0.1 CPUs=$cpus State=UNKNOWN
 PartitionName=local Nodes=$host Default=YES MaxTime=INFINITE State=UP
 CONF
 export SLURM_CONF=$run/slurm.conf
