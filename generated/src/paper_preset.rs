@@ -59,6 +59,10 @@ pub mod spec {
     pub const WORKSPACE_MAX_M: f64 = 0.06;
     /// SHA-256 of the config this module was generated from.
     pub const CONFIG_SHA256: &str = "59289aef8cbc30bb7eac13f243fb4990efebbb228fa922207b6b49da121bbb2d";
+    /// SHA-256 of the parts of that config that shape this solver
+    /// (see `tables::solver_hash` in the generator): a config runs
+    /// on this module exactly when its solver hash is this one.
+    pub const SOLVER_SHA256: &str = "af6969bfd341a99ff18c6d33430f0388962ce372848ccee0c597c0d376dcb2dc";
     /// Drag acceleration of capsule `i` at speed `v` (m/s^2) and its slope d a / d v.
     #[inline]
     pub fn drag(i: usize, v: f64) -> (f64, f64) {
@@ -106,7 +110,7 @@ pub mod tables {
         count: 1usize,
     };
     /// Bytes of table data in this module.
-    pub const TABLE_BYTES: usize = 18usize;
+    pub const TABLE_BYTES: usize = 26usize;
     /// Gradient plans, T/m.
     pub static PLAN_U: [[f64; K]; PLAN_COUNT] = [];
     /// Whether each plan reaches its target.
@@ -138,14 +142,17 @@ pub mod tables {
     pub static FIRST_LEG: [u16; 1usize] = [65535u16];
     /// Per lattice displacement: the chain's summed minimum time, s.
     pub static CHAIN_TIME_S: [f64; 1usize] = [f64::INFINITY];
-    /// Per index cell: plan << 16 | step offset.
+    /// Kept cells of the sparse warm-start index: ascending row-major
+    /// numbers over the index axes (e1, v1, e2, v2, ...).
+    pub static INDEX_CELLS: [u64; 1usize] = [0u64];
+    /// Per kept cell: plan << 16 | step offset.
     pub static INDEX: [u32; 1usize] = [4294967295u32];
     /// Constant sampling's tables: the same grid, plans solved with
     /// a zero-gradient coast of COAST_S after every sample.
     pub const COAST_S: f64 = 0.0;
     pub static COASTED_PLAN_U: [[f64; K]; PLAN_COUNT] = [];
     pub static COASTED_INDEX: [u32; 1usize] = [4294967295u32];
-    /// Per index cell: most QP iterations measured offline (empty
+    /// Per kept index cell: most QP iterations measured offline (empty
     /// when not measured; see `qp_iteration_map.rs`).
     pub static QP_ITERATION_MAP: &[u8] = crate::qp_iteration_map::PAPER_PRESET;
 }
@@ -783,16 +790,31 @@ pub mod solver {
         }
         Some(libm::round(f) as usize)
     }
-    /// The warm-start index cell of relative state `e`; None outside the index.
+    /// Bisection probes that find any cell among `INDEX_CELLS` (2^64 > any count).
+    const INDEX_PROBES: usize = 64;
+    /// The slot of `e`'s cell among the kept cells of the sparse warm-start
+    /// index (`INDEX_CELLS`); None outside the index grid or in a cell no
+    /// stored plan passes near.
     pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
-        let mut flat = 0usize;
+        let mut flat = 0u64;
         let mut j = 0;
         while j < NX {
             let axis = if j % 2 == 0 { &INDEX_POSITION_AXIS } else { &INDEX_SPEED_AXIS };
-            flat = flat * axis.count + axis_nearest(axis, e[j])?;
+            flat = flat * axis.count as u64 + axis_nearest(axis, e[j])? as u64;
             j += 1;
         }
-        Some(flat)
+        let (mut lo, mut hi) = (0usize, INDEX_CELLS.len());
+        let mut probes = 0;
+        while lo < hi && probes < INDEX_PROBES {
+            let mid = lo + (hi - lo) / 2;
+            if INDEX_CELLS[mid] < flat {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+            probes += 1;
+        }
+        if lo < INDEX_CELLS.len() && INDEX_CELLS[lo] == flat { Some(lo) } else { None }
     }
     /// Most QP iterations measured offline in the index cell of `e` (0: not
     /// measured, or outside the index).

@@ -8,6 +8,7 @@
 pub mod config;
 pub mod emit;
 pub mod generate;
+pub mod index;
 pub mod legs;
 pub mod mintime;
 pub mod model;

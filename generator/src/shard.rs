@@ -13,11 +13,14 @@
 //! |------------------|----------------------------------------|------------------|
 //! | `0 .. K-1`       | point of ring r = round + 1, every plan set that has that ring | rings < r |
 //! | `K` (finish)     | improvement sweep of one point, then both mirror points finished at rest and rolled out | all rings |
-//! | `K + 1` (index)  | one warm-start index cell (back-to-back and coasted) | finished plans |
+//! | `K + 1` (index)  | one kept warm-start index cell (back-to-back and coasted) | finished plans |
 //!
 //! where K is the largest ring count over the four plan sets (main and
 //! coasted over the plan grid, back-to-back and coasted over the fine
-//! grid). The legs and the file are assembled by the merge. Each unit is a
+//! grid). The kept index cells (those near the finished plans' samples,
+//! `occupied_cells`) are recomputed from the finish round's results by
+//! every reader, deterministically. The legs and the file are assembled by
+//! the merge. Each unit is a
 //! pure function of the config and the earlier rounds (the functions the
 //! single-process path calls), so which shard computes it, and how many
 //! threads it has, does not change a bit.
@@ -35,6 +38,7 @@
 //! N), before any result is used.
 
 use crate::config::Config;
+use crate::index::CellChooser;
 use crate::mintime::MinTimePlan;
 use crate::model::Model;
 use crate::tables::{
@@ -257,7 +261,9 @@ struct State {
     min_time: Vec<Vec<Option<MinTimePlan>>>,
     /// Finished entries per plan set (finish round).
     entries: Vec<Vec<Option<PlanEntry>>>,
-    /// Index cells per indexed set (index round).
+    /// The kept index cells, known once the finish round is applied.
+    index_cells: Option<Vec<u64>>,
+    /// Index entries per indexed set, one per kept cell (index round).
     index: Vec<Vec<Option<(u16, u16)>>>,
 }
 
@@ -289,14 +295,14 @@ impl<'a> Sharding<'a> {
         })
     }
 
-    fn index_cells(&self) -> usize {
-        let p = &self.problems;
-        (p.index_position_axis.count * p.index_speed_axis.count).pow(p.model.capsule_count() as u32)
-    }
-
-    /// Every unit of round `r`, in the fixed order shards are dealt from
-    /// (lazily: a dense index round has (positions x speeds)^M cells).
-    pub fn units(&self, r: usize) -> Result<Box<dyn Iterator<Item = Unit> + '_>, ShardError> {
+    /// Every unit of round `r`, in the fixed order shards are dealt from;
+    /// `index_cells` is the number of kept index cells (the index round's
+    /// units; they depend on the finished plans).
+    fn units(
+        &self,
+        r: usize,
+        index_cells: usize,
+    ) -> Result<Box<dyn Iterator<Item = Unit> + '_>, ShardError> {
         let unit = |set, item: usize| Unit {
             set,
             item: u32::try_from(item).expect("unit index fits u32"),
@@ -317,39 +323,46 @@ impl<'a> Sharding<'a> {
             Round::Index => Box::new(
                 PlanSet::INDEXED
                     .into_iter()
-                    .flat_map(move |set| (0..self.index_cells()).map(move |c| unit(set, c))),
+                    .flat_map(move |set| (0..index_cells).map(move |c| unit(set, c))),
             ),
         })
     }
 
-    /// Number of units of round `r`.
-    pub fn unit_count(&self, r: usize) -> Result<usize, ShardError> {
+    /// Number of units of round `r` (None for the index round: its cells
+    /// are known only once the plans are finished).
+    pub fn unit_count(&self, r: usize) -> Result<Option<usize>, ShardError> {
         Ok(match self.round(r)? {
-            Round::Index => PlanSet::INDEXED.len() * self.index_cells(),
-            Round::Finish => PlanSet::ALL
-                .iter()
-                .map(|&s| self.problems.search(s).half())
-                .sum(),
-            Round::Ring(_) => self.units(r)?.count(),
+            Round::Index => None,
+            Round::Finish => Some(
+                PlanSet::ALL
+                    .iter()
+                    .map(|&s| self.problems.search(s).half())
+                    .sum(),
+            ),
+            Round::Ring(_) => Some(self.units(r, 0)?.count()),
         })
     }
 
     /// A one-line description of round `r` for logs and `--rounds`.
     pub fn describe(&self, r: usize) -> Result<String, ShardError> {
-        let units = self.unit_count(r)?;
+        let units = self.unit_count(r)?.unwrap_or(0);
         Ok(match self.round(r)? {
             Round::Ring(ring) => format!("round {r}: ring {ring} of the plan grids, {units} plans"),
             Round::Finish => format!(
                 "round {r}: improvement sweep and finishing at rest, {units} points (each also \
                  finishes its mirror image)"
             ),
-            Round::Index => format!("round {r}: warm-start index, {units} cells"),
+            Round::Index => format!(
+                "round {r}: warm-start index, two entries per kept cell (the cells near the \
+                 finished plans' samples)"
+            ),
         })
     }
 
-    fn assigned(&self, r: usize, shard: ShardSpec) -> Result<Vec<Unit>, ShardError> {
+    fn assigned(&self, r: usize, shard: ShardSpec, state: &State) -> Result<Vec<Unit>, ShardError> {
+        let cells = state.index_cells.as_ref().map_or(0, Vec::len);
         Ok(self
-            .units(r)?
+            .units(r, cells)?
             .skip(shard.index)
             .step_by(shard.count)
             .collect())
@@ -365,10 +378,8 @@ impl<'a> Sharding<'a> {
                 .iter()
                 .map(|&s| vec![None; self.problems.search(s).total()])
                 .collect(),
-            index: PlanSet::INDEXED
-                .iter()
-                .map(|_| vec![None; self.index_cells()])
-                .collect(),
+            index_cells: None,
+            index: Vec::new(),
         }
     }
 
@@ -471,6 +482,18 @@ impl<'a> Sharding<'a> {
                 self.apply(&mut state, r, shard, part)
                     .map_err(|why| part_err(path, why))?;
             }
+            if self.rounds[r] == Round::Finish {
+                // The index round's cells: those near the finished plans.
+                let finished = PlanSet::INDEXED.map(|s| Self::finished(&state, s));
+                let cells = self
+                    .problems
+                    .index_cells(PlanSet::INDEXED.map(|s| &finished[indexed_position(s)][..]));
+                state.index = PlanSet::INDEXED
+                    .iter()
+                    .map(|_| vec![None; cells.len()])
+                    .collect();
+                state.index_cells = Some(cells);
+            }
         }
         Ok(state)
     }
@@ -484,7 +507,7 @@ impl<'a> Sharding<'a> {
         shard: ShardSpec,
         part: &Part,
     ) -> Result<(), String> {
-        let expected = self.assigned(r, shard).map_err(|e| e.to_string())?;
+        let expected = self.assigned(r, shard, state).map_err(|e| e.to_string())?;
         if part.units != expected || part.outputs.len() != expected.len() {
             return Err(format!(
                 "holds {} units that are not the {} units of shard {shard} of round {r} for this \
@@ -544,7 +567,7 @@ impl<'a> Sharding<'a> {
     ) -> Result<ShardRun, ShardError> {
         let round = self.round(r)?;
         let state = self.load(inputs, r)?;
-        let units = self.assigned(r, shard)?;
+        let units = self.assigned(r, shard, &state)?;
         progress.start(
             &format!("round {r}/{}, shard {shard}", self.rounds.len()),
             units.len(),
@@ -557,11 +580,12 @@ impl<'a> Sharding<'a> {
                 .collect(),
             _ => Vec::new(),
         };
-        let builders: Vec<_> = PlanSet::INDEXED
+        let choosers: Vec<CellChooser> = PlanSet::INDEXED
             .iter()
             .zip(&finished)
-            .map(|(&s, plans)| p.index_builder(s, plans))
+            .map(|(&s, plans)| CellChooser::new(p.ocp(s), plans, p.index_grid()))
             .collect();
+        let cells = state.index_cells.as_deref().unwrap_or(&[]);
         let timed: Vec<(Output, f64)> = units
             .par_iter()
             .map(|unit| {
@@ -585,7 +609,7 @@ impl<'a> Sharding<'a> {
                         }
                         Output::Finish(entries)
                     }
-                    Round::Index => Output::Cell(builders[indexed_position(set)].cell(item)),
+                    Round::Index => Output::Cell(choosers[indexed_position(set)].cell(cells[item])),
                 };
                 progress.tick();
                 (out, started.elapsed().as_secs_f64())
@@ -622,7 +646,8 @@ impl<'a> Sharding<'a> {
                 .map(|c| c.expect("every cell is computed"))
                 .collect()
         });
-        Ok(self.problems.assemble(plan_sets, indexes))
+        let cells = state.index_cells.expect("the finish round was applied");
+        Ok(self.problems.assemble(plan_sets, cells, indexes))
     }
 }
 

@@ -658,9 +658,14 @@ fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
     Some(libm::round(f) as usize)
 }
 
-/// The warm-start index cell of relative state `e`; None outside the index.
+/// Bisection probes that find any cell among `INDEX_CELLS` (2^64 > any count).
+const INDEX_PROBES: usize = 64;
+
+/// The slot of `e`'s cell among the kept cells of the sparse warm-start
+/// index (`INDEX_CELLS`); None outside the index grid or in a cell no
+/// stored plan passes near.
 pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
-    let mut flat = 0usize;
+    let mut flat = 0u64;
     let mut j = 0;
     while j < NX {
         let axis = if j % 2 == 0 {
@@ -668,10 +673,26 @@ pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
         } else {
             &INDEX_SPEED_AXIS
         };
-        flat = flat * axis.count + axis_nearest(axis, e[j])?;
+        flat = flat * axis.count as u64 + axis_nearest(axis, e[j])? as u64;
         j += 1;
     }
-    Some(flat)
+    // Lower bound by bisection, a fixed number of probes at most.
+    let (mut lo, mut hi) = (0usize, INDEX_CELLS.len());
+    let mut probes = 0;
+    while lo < hi && probes < INDEX_PROBES {
+        let mid = lo + (hi - lo) / 2;
+        if INDEX_CELLS[mid] < flat {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+        probes += 1;
+    }
+    if lo < INDEX_CELLS.len() && INDEX_CELLS[lo] == flat {
+        Some(lo)
+    } else {
+        None
+    }
 }
 
 /// Most QP iterations measured offline in the index cell of `e` (0: not

@@ -3,7 +3,10 @@
 
 use crate::cli::{load_config, GenerateArgs};
 use anyhow::{bail, Context, Result};
-use capsule_mpc_generator::generate::{differences, emit_all, generate, write_atomically};
+use capsule_mpc_generator::config::Config;
+use capsule_mpc_generator::generate::{
+    differences, emit_module_files, generate_module, write_atomically, ControllerModule,
+};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_generator::shard::{compute_shard, merge_parts, ShardSpec, Sharding};
 use capsule_mpc_generator::tables::{Progress, Tables};
@@ -44,7 +47,12 @@ impl Bar {
 }
 
 pub fn run(args: &GenerateArgs) -> Result<()> {
-    let config = load_config(args.config.as_deref())?;
+    let module = ControllerModule::from(args.module);
+    let config = match &args.config {
+        Some(_) => load_config(args.config.as_deref())?,
+        None => module.default_config(),
+    };
+    check_module_fits(module, &config)?;
     let started = Instant::now();
     let bar = Bar(Mutex::new(None));
     if args.rounds {
@@ -87,16 +95,16 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         if args.parts.is_empty() {
             bail!("--merge needs the part files of every round");
         }
-        emit_all(&config, merge_parts(&config, &args.parts)?)?
+        emit_module_files(module, &config, merge_parts(&config, &args.parts)?)?
     } else if args.reuse_tables && !args.check {
-        let path = out_dir.join("tables.bin");
+        let path = out_dir.join(module.tables_path());
         let tables = Tables::read(&path, &config).context("--reuse-tables")?;
-        emit_all(&config, tables)?
+        emit_module_files(module, &config, tables)?
     } else {
-        generate(&config, &bar)?
+        generate_module(module, &config, &bar)?
     };
     bar.finish();
-    if !qp_map::fill_if_compiled(&mut files)? {
+    if module == ControllerModule::Controller && !qp_map::fill_if_compiled(&mut files)? {
         eprintln!(
             "note: the emitted solver differs from the one compiled into this binary, so its \
              QP iteration map was left unmeasured; rebuild (`cargo build --release`) and run \
@@ -108,7 +116,7 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
     let table_bytes = files
         .files
         .iter()
-        .find(|(p, _)| p.ends_with("tables.bin"))
+        .find(|(p, _)| p.ends_with(module.tables_path()))
         .map_or(0, |(_, b)| b.len());
     if args.check {
         let diff = differences(&out_dir, &files);
@@ -128,12 +136,27 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
     }
     write_atomically(&out_dir, &files)?;
     println!(
-        "generated {} in {elapsed:.1} s: {} plans ({} reach their target), {} index cells, tables.bin {} bytes",
+        "generated {} (module {}) in {elapsed:.1} s: {} plans ({} reach their target), {} index cells, {} {} bytes",
         out_dir.display(),
+        module.module_name(),
         t.plans.len(),
         t.reached_count(),
         t.index.len(),
+        module.tables_path(),
         table_bytes
     );
+    Ok(())
+}
+
+/// The `three-capsules` module is named for its capsule count (the
+/// `controller` module takes any count: users regenerate it for theirs).
+fn check_module_fits(module: ControllerModule, config: &Config) -> Result<()> {
+    let m = config.capsule_count();
+    if module == ControllerModule::ThreeCapsules && m != 3 {
+        bail!(
+            "--config has {m} capsules; the `three-capsules` module is built for 3 \
+             (regenerate the `controller` module for other counts)"
+        );
+    }
     Ok(())
 }
