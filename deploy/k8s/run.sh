@@ -7,7 +7,8 @@
 #   deploy/k8s/run.sh CONFIG IMAGE SHARDS [CPUS_PER_SHARD] [PARALLELISM]
 #
 # e.g. deploy/k8s/run.sh configs/paper.toml registry.example.org/capsule-mpc:1 100 32
-# The merged crate ends up in /work/generated on the capsule-work volume.
+# The merged crate ends up in /work/generated on the capsule-work volume;
+# CAPSULE_MODULE=three-capsules emits the three-capsule module instead.
 set -euo pipefail
 if [ $# -lt 3 ]; then
     sed -n '2,10p' "$0" >&2
@@ -15,6 +16,7 @@ if [ $# -lt 3 ]; then
 fi
 here=$(cd "$(dirname "$0")" && pwd)
 config=$1 image=$2 shards=$3 cpus=${4:-1} parallelism=${5:-$3}
+module=${CAPSULE_MODULE:-controller}
 timeout_s=${CAPSULE_K8S_ROUND_TIMEOUT_S:-86400}
 # Waits until job $1 is Complete; fails as soon as it is Failed (an index
 # out of retries), or after timeout_s.
@@ -51,7 +53,7 @@ fi
 echo "$rounds rounds of $shards shards"
 render() {
     sed -e "s|__ROUND__|$1|g" -e "s|__SHARDS__|$shards|g" -e "s|__PARALLELISM__|$parallelism|g" \
-        -e "s|__CPUS__|$cpus|g" -e "s|__IMAGE__|$image|g" "$2"
+        -e "s|__CPUS__|$cpus|g" -e "s|__IMAGE__|$image|g" -e "s|__MODULE__|$module|g" "$2"
 }
 for ((r = 0; r < rounds; r++)); do
     kubectl delete job "capsule-round-$r" --ignore-not-found

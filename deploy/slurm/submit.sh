@@ -6,7 +6,9 @@
 #   deploy/slurm/submit.sh CONFIG WORK_DIR OUT_DIR SHARDS [sbatch options...]
 #
 # WORK_DIR and OUT_DIR must be on a filesystem every node sees, and so must
-# the binary (CAPSULE_BIN, default target/release/capsule-mpc). Extra
+# the binary (CAPSULE_BIN, default target/release/capsule-mpc). The merge
+# emits the module CAPSULE_MODULE (default controller; three-capsules for
+# the three-capsule preset) into OUT_DIR. Extra
 # options go to every sbatch (e.g. --partition=compute --cpus-per-task=32
 # --time=2:00:00). A failed shard cancels everything after it
 # (--kill-on-invalid-dep=yes).
@@ -36,6 +38,7 @@ rounds=$("$bin" generate --config "$config" --rounds 2>/dev/null)
 mkdir -p "$work/logs"
 for ((r = 0; r < rounds; r++)); do mkdir -p "$work/round-$r"; done
 common=(--parsable --kill-on-invalid-dep=yes "$@")
+export CAPSULE_MODULE=${CAPSULE_MODULE:-controller}
 export CAPSULE_BIN=$bin CAPSULE_CONFIG=$config CAPSULE_WORK=$work CAPSULE_OUT=$out CAPSULE_SHARDS=$shards
 dep=()
 for ((r = 0; r < rounds; r++)); do
