@@ -11,7 +11,7 @@
 
 use super::spec::*;
 use super::tables::*;
-use crate::{Leg, PlanSolver, SolveReport, SolveStatus};
+use crate::{Leg, PlanSolver, SolveReport, SolveStatus, Tier};
 
 /// Per-capsule 2x2 Jacobian (row major) and input column of one sample.
 #[derive(Debug, Clone, Copy)]
@@ -44,6 +44,12 @@ pub struct Solver {
     qp: BoxQp,
     /// The actuation schedule the plan is refined for.
     schedule: Schedule,
+    /// The explicit tier's plan of this step (see `solve_explicit`), a
+    /// candidate for `plan` until the next `solve` or `adopt_explicit`.
+    explicit_plan: [f64; K],
+    explicit_ready: bool,
+    /// Which tier produced `plan`.
+    tier: Tier,
 }
 
 /// How the scanner plays the plan: actuation phases of `samples_per_phase`
@@ -129,6 +135,9 @@ impl Solver {
             tail_grad: [0.0; NX],
             qp: BoxQp::new(),
             schedule: Schedule::BACK_TO_BACK,
+            explicit_plan: [0.0; K],
+            explicit_ready: false,
+            tier: Tier::Refined,
         }
     }
 
@@ -141,6 +150,56 @@ impl Solver {
     pub fn reset(&mut self) {
         self.plan = [0.0; K];
         self.has_plan = false;
+        self.explicit_ready = false;
+    }
+
+    /// The explicit tier from `e` (see the `explicit` module): the stored
+    /// sample's window QP at the deviation, no rollout. The plan becomes a
+    /// candidate: `adopt_explicit` makes it the plan, or the next `solve`
+    /// weighs it by its true cost. `cost` in the report is the
+    /// Gauss-Newton model's prediction, not a rollout.
+    pub fn solve_explicit(&mut self, e: &[f64; NX]) -> SolveReport {
+        let mut report = SolveReport {
+            status: SolveStatus::Refined,
+            cost: 0.0,
+            took_table_plan: true,
+            qp_iterations: 0,
+            max_qp_iterations: 0,
+            tier: Tier::Explicit,
+        };
+        match super::explicit::explicit_plan(e, self.schedule.coasted(), &mut self.qp, &mut self.explicit_plan) {
+            Some(out) => {
+                self.explicit_ready = true;
+                report.cost = out.predicted_cost;
+                report.qp_iterations = out.qp_iterations;
+                report.max_qp_iterations = out.qp_iterations;
+                if !out.converged {
+                    report.status = SolveStatus::IterationLimit;
+                }
+            }
+            None => {
+                self.explicit_ready = false;
+                report.status = SolveStatus::OutOfRange;
+                report.cost = f64::INFINITY;
+                report.took_table_plan = false;
+            }
+        }
+        report
+    }
+
+    /// Makes the explicit tier's plan (from `solve_explicit`) the plan.
+    pub fn adopt_explicit(&mut self) {
+        if self.explicit_ready {
+            self.plan = self.explicit_plan;
+            self.has_plan = true;
+            self.explicit_ready = false;
+            self.tier = Tier::Explicit;
+        }
+    }
+
+    /// The explicit tier's plan of the last `solve_explicit`.
+    pub fn explicit_plan(&self) -> &[f64; K] {
+        &self.explicit_plan
     }
 
     /// The current plan (gradient per sample, T/m), `plan()[0]` first.
@@ -190,6 +249,7 @@ impl Solver {
             took_table_plan: false,
             qp_iterations: 0,
             max_qp_iterations: 0,
+            tier: self.tier,
         };
         // `fresh`: `states` and `jac` belong to the current `plan`, so the
         // first SQP iteration need not roll it out again.
@@ -218,14 +278,29 @@ impl Solver {
                         cost = c;
                         fresh = false;
                         report.took_table_plan = true;
+                        self.tier = Tier::Refined;
                     }
                 }
-                None if !self.has_plan => {
+                None if !self.has_plan && !self.explicit_ready => {
                     report.status = SolveStatus::OutOfRange;
                     report.cost = f64::INFINITY;
                     return report;
                 }
                 None => {}
+            }
+        }
+        // The explicit tier's plan of this step, if any, is the refinement's
+        // first candidate on equal terms: taken only when its true cost is
+        // lower; the SQP below then only accepts decreases, so the refined
+        // plan never costs more than the explicit one.
+        if self.explicit_ready {
+            self.explicit_ready = false;
+            let c = rollout_cost_below(e, &self.explicit_plan, &self.schedule, cost);
+            if c < cost {
+                self.plan = self.explicit_plan;
+                cost = c;
+                fresh = false;
+                self.tier = Tier::Explicit;
             }
         }
         self.has_plan = true;
@@ -237,6 +312,9 @@ impl Solver {
             let (new_cost, qp_iters, converged) = self.sqp_iteration(e, cost);
             // The plan changed only if the line search lowered the cost.
             fresh = !(new_cost < cost);
+            if new_cost < cost {
+                self.tier = Tier::Refined;
+            }
             cost = new_cost;
             report.qp_iterations += qp_iters;
             if qp_iters > report.max_qp_iterations {
@@ -248,6 +326,7 @@ impl Solver {
             it += 1;
         }
         report.cost = cost;
+        report.tier = self.tier;
         report
     }
 
@@ -452,8 +531,26 @@ impl BoxQp {
     /// Returns (iterations, converged). On the iteration bound, `x` is the
     /// last feasible iterate (always within the box).
     pub fn solve(&mut self) -> (u32, bool) {
-        self.x = [0.0; N];
-        self.active = [0; N];
+        self.solve_from(&[0; N])
+    }
+
+    /// As `solve`, warm-started from the active set `active` (-1 lower,
+    /// +1 upper, 0 free): the start puts active variables on their bounds
+    /// and free ones at 0, which is feasible since lo <= 0 <= hi.
+    pub fn solve_from(&mut self, active: &[i8; N]) -> (u32, bool) {
+        let mut j = 0;
+        while j < N {
+            let a = active[j];
+            self.active[j] = if a > 0 { 1 } else if a < 0 { -1 } else { 0 };
+            self.x[j] = if a > 0 {
+                self.hi[j]
+            } else if a < 0 {
+                self.lo[j]
+            } else {
+                0.0
+            };
+            j += 1;
+        }
         self.factored = 0;
         let mut iter = 0u32;
         while (iter as usize) < QP_MAX_ITERATIONS {
@@ -639,7 +736,7 @@ impl BoxQp {
     }
 }
 
-fn clamp_u(u: f64) -> f64 {
+pub fn clamp_u(u: f64) -> f64 {
     if u > U_MAX_T_PER_M {
         U_MAX_T_PER_M
     } else if u < -U_MAX_T_PER_M {
@@ -649,7 +746,7 @@ fn clamp_u(u: f64) -> f64 {
     }
 }
 
-fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
+pub fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
     let f = (v - axis.start) / axis.step;
     // NaN fails both comparisons and is rejected here.
     if !(f > -0.5 && f < axis.count as f64 - 0.5) {
@@ -1061,6 +1158,8 @@ impl PlanSolver<NX, K> for Solver {
     const TABLE_BYTES: usize = TABLE_BYTES;
     const WORKSPACE_MIN_M: f64 = WORKSPACE_MIN_M;
     const WORKSPACE_MAX_M: f64 = WORKSPACE_MAX_M;
+    const HAS_EXPLICIT_TIER: bool = super::explicit_tables::EXPLICIT_COUNT > 0;
+    const EXPLICIT_CERTIFIED_OPS: u64 = super::explicit_tables::EXPLICIT_CERTIFIED_OPS;
 
     fn new() -> Self {
         Solver::new()
@@ -1076,6 +1175,12 @@ impl PlanSolver<NX, K> for Solver {
     }
     fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
         Solver::solve(self, e)
+    }
+    fn solve_explicit(&mut self, e: &[f64; NX]) -> SolveReport {
+        Solver::solve_explicit(self, e)
+    }
+    fn adopt_explicit(&mut self) {
+        Solver::adopt_explicit(self)
     }
     fn plan(&self) -> &[f64; K] {
         Solver::plan(self)

@@ -4,12 +4,12 @@
 
 use crate::metrics::Metrics;
 use crate::plant::{Phase, Plant};
-use crate::report::{MeasurementRecord, RunReport};
+use crate::report::{MeasurementRecord, RunReport, TierCycles};
 use anyhow::{bail, Context, Result};
-use capsule_mpc_generator::config::{Config, DisturbanceConfig};
+use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
 use capsule_mpc_generator::model::Model;
-use capsule_mpc_runtime::controller::SwitchingRule;
-use capsule_mpc_runtime::generated::PlanSolver;
+use capsule_mpc_runtime::controller::{Refine, SwitchingRule};
+use capsule_mpc_runtime::generated::{PlanSolver, Tier};
 use capsule_mpc_runtime::{Controller, RuntimeStatus};
 use std::time::Instant;
 
@@ -113,6 +113,9 @@ pub struct RunOptions {
     /// Terminal hold near the target (off: the MPC re-plans to the end,
     /// as the paper's controller does).
     pub hold: bool,
+    /// When the SQP refinement runs after the explicit tier (the config's
+    /// `controller.refine` by default).
+    pub refine: RefineMode,
 }
 
 impl RunOptions {
@@ -133,6 +136,7 @@ impl RunOptions {
             lose_every: None,
             preset: Preset::Default,
             hold: true,
+            refine: config.controller.refine,
         }
     }
 }
@@ -204,6 +208,7 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     settings.sampling = opts.sampling.runtime();
     settings.switching = opts.switching;
     settings.compensate_delay = opts.compensate_delay;
+    settings.refine = runtime_refine(opts.refine);
     settings.extra_delay_s = opts.extra_delay_s;
     settings.position_noise_m = opts.position_noise_m;
     settings.disturbance_bound = opts.disturbance.bound_si();
@@ -287,6 +292,11 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
             out
         };
         statuses.count(out.status);
+        match out.solve.map(|r| r.tier) {
+            Some(Tier::Explicit) => statuses.explicit += 1,
+            Some(Tier::Refined) => statuses.refined += 1,
+            None => {}
+        }
         for &u in &out.gradients_t_per_m[..out.actuation_samples] {
             if plant.time_s() >= opts.duration_s - 1e-9 {
                 break;
@@ -320,6 +330,10 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     report.sampling = Some(opts.sampling.name().to_string());
     report.seed = Some(opts.seed);
     report.fallback_cycles = Some(statuses.fallback);
+    report.tier_cycles = Some(TierCycles {
+        explicit: statuses.explicit,
+        refined: statuses.refined,
+    });
     Ok(report)
 }
 
@@ -378,6 +392,18 @@ fn explain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
 #[derive(Debug, Default)]
 struct StatusCounts {
     fallback: usize,
+    /// Cycles whose plan came from each tier.
+    explicit: usize,
+    refined: usize,
+}
+
+/// The runtime's refinement setting for the config's.
+pub fn runtime_refine(r: RefineMode) -> Refine {
+    match r {
+        RefineMode::None => Refine::None,
+        RefineMode::Once => Refine::Once,
+        RefineMode::PerSample => Refine::PerSample,
+    }
 }
 
 impl StatusCounts {

@@ -1,0 +1,207 @@
+//! The explicit tier against references on the same stored data: its plan
+//! equals clarabel's solution of the stored window QP at the deviation;
+//! the refinement never raises the true cost of the explicit plan; its
+//! operation bound covers what it does.
+
+use capsule_mpc_generator::config::Config;
+use capsule_mpc_generator::explicit::{
+    build_explicit, dense_hessian, reference_box_qp, ExplicitTables, PlanSource,
+};
+use capsule_mpc_generator::tables::Tables;
+use capsule_mpc_runtime::generated::controller::{explicit, explicit_tables, solver, spec, tables};
+use capsule_mpc_runtime::generated::{SolveStatus, Tier};
+use rand::{Rng, SeedableRng};
+use std::path::Path;
+use std::sync::OnceLock;
+
+/// The generator's explicit data, rebuilt from the committed tables (the
+/// emitted module is checked against it below).
+fn generator_explicit() -> &'static ExplicitTables {
+    static DATA: OnceLock<ExplicitTables> = OnceLock::new();
+    DATA.get_or_init(|| {
+        let config = Config::embedded_default();
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("generated/tables.bin");
+        let tables = Tables::read(&path, &config).expect("committed tables read");
+        build_explicit(&config, &tables)
+    })
+}
+
+fn stored_row(source: PlanSource, plan: usize) -> &'static [f64; spec::K] {
+    match source {
+        PlanSource::Main => &tables::PLAN_U[plan],
+        PlanSource::Coasted => &tables::COASTED_PLAN_U[plan],
+        PlanSource::Fine => &tables::FINE_PLAN_U[plan],
+        PlanSource::CoastedFine => &tables::COASTED_FINE_PLAN_U[plan],
+    }
+}
+
+#[test]
+fn the_emitted_samples_are_the_generators() {
+    let g = generator_explicit();
+    assert_eq!(g.samples.len(), explicit_tables::EXPLICIT_COUNT);
+    assert_eq!(&g.index_slot[..], &explicit_tables::EXPLICIT_INDEX_SLOT[..]);
+    assert_eq!(
+        &g.coasted_index_slot[..],
+        &explicit_tables::COASTED_EXPLICIT_INDEX_SLOT[..]
+    );
+    for (s, e) in g.samples.iter().zip(explicit_tables::EXPLICIT.iter()) {
+        assert_eq!(s.source as u8, e.source);
+        assert_eq!((s.plan, s.offset), (e.plan as usize, e.offset as usize));
+        assert_eq!(&s.hessian[..], &e.hessian[..]);
+        assert_eq!(&s.gradient[..], &e.gradient[..]);
+        assert_eq!(&s.active[..], &e.active[..]);
+    }
+}
+
+/// Explicit plan vs clarabel on the same stored QP, at random deviations
+/// within a cell around random stored samples (both schedules).
+#[test]
+fn explicit_plan_matches_clarabel_on_the_stored_qp() {
+    let g = generator_explicit();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(15);
+    let mut qp = solver::BoxQp::new();
+    let mut plan = [0.0; spec::K];
+    let (mut checked, mut worst) = (0, 0.0_f64);
+    for _ in 0..400 {
+        let slot = rng.gen_range(0..g.samples.len());
+        let s = &g.samples[slot];
+        let coasted = s.source.coasted();
+        let mut e = [0.0; spec::NX];
+        for j in 0..spec::NX {
+            let half = if j % 2 == 0 {
+                0.5 * tables::INDEX_POSITION_AXIS.step
+            } else {
+                0.5 * tables::INDEX_SPEED_AXIS.step
+            };
+            e[j] = s.state[j] + rng.gen_range(-half..half);
+        }
+        // The sample the runtime takes for e may be another: compare on the
+        // one it takes.
+        let Some(used) = explicit::explicit_slot(&e, coasted) else {
+            continue;
+        };
+        let out = explicit::explicit_plan(&e, coasted, &mut qp, &mut plan).expect("in range");
+        assert_eq!(out.slot, used);
+        assert!(out.converged, "QP did not converge at slot {used}");
+        let s = &g.samples[used];
+        let n = spec::N;
+        let row = stored_row(s.source, s.plan);
+        let u: Vec<f64> = (0..spec::K)
+            .map(|i| {
+                if s.offset + i < spec::K {
+                    row[s.offset + i]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let d: Vec<f64> = (0..spec::NX).map(|j| e[j] - s.state[j]).collect();
+        let grad: Vec<f64> = (0..n)
+            .map(|a| {
+                s.gradient[a]
+                    + (0..spec::NX)
+                        .map(|j| s.sensitivity[a * spec::NX + j] * d[j])
+                        .sum::<f64>()
+            })
+            .collect();
+        let lo: Vec<f64> = (0..n).map(|a| -spec::U_MAX_T_PER_M - u[a]).collect();
+        let hi: Vec<f64> = (0..n).map(|a| spec::U_MAX_T_PER_M - u[a]).collect();
+        let x = reference_box_qp(&dense_hessian(s, n), &grad, &lo, &hi).expect("clarabel solves");
+        let h = dense_hessian(s, n);
+        let obj = |x: &[f64]| -> f64 {
+            (0..n)
+                .map(|a| x[a] * (grad[a] + 0.5 * (0..n).map(|b| h[a][b] * x[b]).sum::<f64>()))
+                .sum()
+        };
+        let mut diff = 0.0_f64;
+        for a in 0..n {
+            let reference = (u[a] + x[a]).clamp(-spec::U_MAX_T_PER_M, spec::U_MAX_T_PER_M);
+            diff = diff.max((plan[a] - reference).abs());
+        }
+        if diff > 1e-6 {
+            eprintln!(
+                "slot {used}: diff {diff:.2e} obj ours {:.12e} clarabel {:.12e} iters {}",
+                obj(&qp.x),
+                obj(&x),
+                out.qp_iterations
+            );
+        }
+        worst = worst.max(diff);
+        for i in n..spec::K {
+            assert_eq!(
+                plan[i], u[i],
+                "the tail beyond the window is the stored one"
+            );
+        }
+        checked += 1;
+    }
+    eprintln!("{checked} explicit plans, worst difference to clarabel {worst:.2e} T/m");
+    assert!(
+        checked >= 300,
+        "only {checked} states fell in a cell with a sample"
+    );
+    assert!(
+        worst <= 1e-6,
+        "explicit plan differs from clarabel by {worst:e} T/m"
+    );
+}
+
+/// Refinement after the explicit tier: the returned plan's true cost is
+/// never above the explicit plan's (rolled out here independently).
+#[test]
+fn refinement_never_raises_the_true_cost() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(16);
+    let schedules = [
+        (spec::K, 0.0),
+        (1, tables::COAST_S),
+        (spec::N, tables::COAST_S),
+    ];
+    let mut compared = 0;
+    let mut refined_won = 0;
+    for t in 0..600 {
+        let (samples, coast) = schedules[t % 3];
+        let sched = solver::Schedule::new(samples, coast);
+        let mut s = solver::Solver::new();
+        s.set_schedule(samples, coast);
+        let mut e = [0.0; spec::NX];
+        for j in 0..spec::NX {
+            e[j] = if j % 2 == 0 {
+                rng.gen_range(-0.04..0.04)
+            } else {
+                rng.gen_range(-0.25..0.25)
+            };
+        }
+        // Half the trials with a previous plan (a shifted explicit one).
+        if t % 2 == 1 && s.solve_explicit(&e).status != SolveStatus::OutOfRange {
+            s.adopt_explicit();
+            s.shift(1);
+        }
+        let x = s.solve_explicit(&e);
+        if x.status == SolveStatus::OutOfRange {
+            continue;
+        }
+        let explicit_cost = solver::rollout_cost(&e, s.explicit_plan(), &sched);
+        let r = s.solve(&e);
+        let refined_cost = solver::rollout_cost(&e, s.plan(), &sched);
+        assert_eq!(
+            r.cost, refined_cost,
+            "the report's cost is the plan's true cost"
+        );
+        assert!(
+            refined_cost <= explicit_cost,
+            "refinement raised the cost: {refined_cost} > {explicit_cost} at {e:?}"
+        );
+        if r.tier == Tier::Explicit {
+            assert_eq!(
+                s.plan(),
+                s.explicit_plan(),
+                "tier Explicit means the explicit plan"
+            );
+        } else {
+            refined_won += 1;
+        }
+        compared += 1;
+    }
+    eprintln!("{compared} states compared, refinement cheaper in {refined_won}");
+    assert!(compared >= 200, "only {compared} states in range");
+}
