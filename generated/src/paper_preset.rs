@@ -157,9 +157,9 @@ pub mod explicit_tables {
     /// Entries of an N x N symmetric matrix's upper triangle.
     pub const HESSIAN_LEN: usize = N * (N + 1) / 2;
     /// One stored sample's window QP as a function of the deviation
-    /// d = e - state: min 1/2 x'Hx + (gradient + sensitivity d)'x
-    /// over the window's input changes x (SI; the cost halved, as
-    /// the refinement's QP).
+    /// d = e - state: min 1/2 x'Hx + (sensitivity d)'x over the
+    /// window's input changes x (tracking the stored trajectory; SI,
+    /// the cost halved as in the refinement's QP).
     #[derive(Debug, Clone, Copy)]
     pub struct ExplicitSample {
         /// Plan table: 0 back to back, 1 constant sampling, 2 fine,
@@ -172,7 +172,8 @@ pub mod explicit_tables {
         pub state: [f64; NX],
         /// Condensed Hessian, upper triangle row by row.
         pub hessian: [f64; HESSIAN_LEN],
-        /// QP gradient at zero deviation.
+        /// Gradient of the online cost in the window inputs at zero
+        /// deviation (for the cost prediction).
         pub gradient: [f64; N],
         /// d gradient / d deviation.
         pub sensitivity: [[f64; NX]; N],
@@ -183,6 +184,8 @@ pub mod explicit_tables {
         /// Gauss-Newton model of that cost in d (halved, as the QP).
         pub cost_gradient: [f64; NX],
         pub cost_hessian: [[f64; NX]; NX],
+        /// Slot of the same plan's next sample (NO_SLOT: not stored).
+        pub next: u16,
     }
     /// Number of stored samples.
     pub const EXPLICIT_COUNT: usize = 0usize;
@@ -251,6 +254,8 @@ pub mod solver {
         /// candidate for `plan` until the next `solve` or `adopt_explicit`.
         explicit_plan: [f64; K],
         explicit_ready: bool,
+        /// Slot of the explicit tier's last stored sample (usize::MAX: none).
+        explicit_slot: usize,
         /// Which tier produced `plan`.
         tier: Tier,
     }
@@ -332,6 +337,7 @@ pub mod solver {
                 schedule: Schedule::BACK_TO_BACK,
                 explicit_plan: [0.0; K],
                 explicit_ready: false,
+                explicit_slot: usize::MAX,
                 tier: Tier::Refined,
             }
         }
@@ -344,6 +350,7 @@ pub mod solver {
             self.plan = [0.0; K];
             self.has_plan = false;
             self.explicit_ready = false;
+            self.explicit_slot = usize::MAX;
         }
         /// The explicit tier from `e` (see the `explicit` module): the stored
         /// sample's window QP at the deviation, no rollout. The plan becomes a
@@ -359,14 +366,17 @@ pub mod solver {
                 max_qp_iterations: 0,
                 tier: Tier::Explicit,
             };
+            let coasted = self.schedule.coasted();
             match super::explicit::explicit_plan(
                 e,
-                self.schedule.coasted(),
+                coasted,
+                self.explicit_slot,
                 &mut self.qp,
                 &mut self.explicit_plan,
             ) {
                 Some(out) => {
                     self.explicit_ready = true;
+                    self.explicit_slot = out.slot;
                     report.cost = out.predicted_cost;
                     report.qp_iterations = out.qp_iterations;
                     report.max_qp_iterations = out.qp_iterations;
@@ -376,6 +386,7 @@ pub mod solver {
                 }
                 None => {
                     self.explicit_ready = false;
+                    self.explicit_slot = usize::MAX;
                     report.status = SolveStatus::OutOfRange;
                     report.cost = f64::INFINITY;
                     report.took_table_plan = false;
@@ -487,6 +498,7 @@ pub mod solver {
                     None => {}
                 }
             }
+            self.tier = Tier::Refined;
             if self.explicit_ready {
                 self.explicit_ready = false;
                 let c = rollout_cost_below(e, &self.explicit_plan, &self.schedule, cost);
@@ -1406,19 +1418,18 @@ pub mod explicit {
     //! The explicit tier: a first answer with no model rollout.
     //!
     //! Every step: (1) look the state up (the fine end-game grid at rest, else
-    //! the warm-start index) and take the stored sample it names; (2) the
-    //! deviation d = e - (the sample's stored state); (3) the window QP's
-    //! gradient g0 + F d from the stored sensitivities, its Hessian and the
-    //! box of the stored plan's inputs; (4) the box QP, warm-started from the
-    //! active set of the stored solution; (5) plan = stored inputs + the QP's
-    //! step, clamped, then the stored tail. The linearization was done
+    //! the warm-start index) and take the nearest of the stored samples named
+    //! by its cell, the 2 NX neighbouring cells and the previous step's
+    //! successor on its plan; (2) the deviation d = e - (the sample's stored
+    //! state); (3) the window QP's gradient F d from the stored sensitivities,
+    //! its Hessian and the box of the stored plan's inputs; (4) the box QP,
+    //! warm-started from the active set of the stored solution; (5) plan =
+    //! stored inputs + the QP's step, clamped, then the stored tail. The linearization was done
     //! offline (`capsule-mpc-generator`'s `explicit`); every loop here has a
     //! constant bound, and the QP stops at `QP_MAX_ITERATIONS`, so the
     //! operation count is bounded by `EXPLICIT_CERTIFIED_OPS`.
     use super::explicit_tables::*;
-    use super::solver::{
-        axis_nearest, clamp_u, index_cell, BoxQp, FINE_REST_SPEED_M_PER_S,
-    };
+    use super::solver::{axis_nearest, clamp_u, BoxQp, FINE_REST_SPEED_M_PER_S};
     use super::spec::*;
     use super::tables::*;
     /// What one explicit step produced besides the plan.
@@ -1436,22 +1447,89 @@ pub mod explicit {
     }
     /// The stored sample for relative state `e`: at rest on the fine grid,
     /// the fine plan's (the index's nearest sample there is a finished plan,
-    /// which cannot separate capsules at rest); otherwise the index cell's.
-    pub fn explicit_slot(e: &[f64; NX], coasted: bool) -> Option<usize> {
+    /// which cannot separate capsules at rest); otherwise the nearest (in
+    /// index cells) of the samples named by the cell of `e`, its 2 NX
+    /// neighbours along the axes, and the successor of `last` (the previous
+    /// step's sample; `usize::MAX`: none). Why not the cell's own sample
+    /// alone: it was chosen by its cost from the cell's centre, and a cell is
+    /// 0.1 m/s wide in speed; linearized around it, the deviation reached
+    /// 0.1 m/s and consecutive steps jumped between plans.
+    pub fn explicit_slot(e: &[f64; NX], coasted: bool, last: usize) -> Option<usize> {
         if let Some(slot) = fine_slot(e, coasted) {
             return Some(slot);
         }
-        let cell = index_cell(e)?;
         let slots = if coasted {
             &COASTED_EXPLICIT_INDEX_SLOT
         } else {
             &EXPLICIT_INDEX_SLOT
         };
-        let slot = *slots.get(cell)?;
-        if slot == NO_SLOT || slot as usize >= EXPLICIT_COUNT {
-            return None;
+        let mut idx = [0usize; NX];
+        let mut flat = 0usize;
+        let mut j = 0;
+        while j < NX {
+            let axis = axis_of(j);
+            idx[j] = axis_nearest(&axis, e[j])?;
+            flat = flat * axis.count + idx[j];
+            j += 1;
         }
-        Some(slot as usize)
+        let mut best = usize::MAX;
+        let mut best_distance = f64::INFINITY;
+        consider(e, slot_at(slots, flat), &mut best, &mut best_distance);
+        let mut stride = 1usize;
+        let mut j = NX;
+        while j > 0 {
+            j -= 1;
+            let count = axis_of(j).count;
+            if idx[j] > 0 {
+                consider(
+                    e,
+                    slot_at(slots, flat - stride),
+                    &mut best,
+                    &mut best_distance,
+                );
+            }
+            if idx[j] + 1 < count {
+                consider(
+                    e,
+                    slot_at(slots, flat + stride),
+                    &mut best,
+                    &mut best_distance,
+                );
+            }
+            stride *= count;
+        }
+        if last < EXPLICIT_COUNT {
+            consider(e, EXPLICIT[last].next as usize, &mut best, &mut best_distance);
+        }
+        if best < EXPLICIT_COUNT { Some(best) } else { None }
+    }
+    fn axis_of(j: usize) -> Axis {
+        if j % 2 == 0 { INDEX_POSITION_AXIS } else { INDEX_SPEED_AXIS }
+    }
+    fn slot_at(slots: &[u16], flat: usize) -> usize {
+        match slots.get(flat) {
+            Some(&s) if s != NO_SLOT => s as usize,
+            _ => usize::MAX,
+        }
+    }
+    /// Keeps `slot` in `best` if its stored state is nearer to `e` (squared
+    /// distance in index cells) than the best so far.
+    fn consider(e: &[f64; NX], slot: usize, best: &mut usize, best_distance: &mut f64) {
+        if slot >= EXPLICIT_COUNT {
+            return;
+        }
+        let state = &EXPLICIT[slot].state;
+        let mut dist = 0.0;
+        let mut j = 0;
+        while j < NX {
+            let r = (e[j] - state[j]) / axis_of(j).step;
+            dist += r * r;
+            j += 1;
+        }
+        if dist < *best_distance {
+            *best_distance = dist;
+            *best = slot;
+        }
     }
     fn fine_slot(e: &[f64; NX], coasted: bool) -> Option<usize> {
         if FINE_COUNT == 0 {
@@ -1506,7 +1584,7 @@ pub mod explicit {
                 idx += 1;
                 b += 1;
             }
-            let mut g = s.gradient[a];
+            let mut g = 0.0;
             let mut j = 0;
             while j < NX {
                 g += s.sensitivity[a][j] * d[j];
@@ -1519,14 +1597,16 @@ pub mod explicit {
         }
     }
     /// The explicit plan for relative state `e` into `out` (`coasted`:
-    /// constant sampling's tables); None outside the index and the fine grid.
+    /// constant sampling's tables; `last`: the previous step's slot, or
+    /// `usize::MAX`); None outside the index and the fine grid.
     pub fn explicit_plan(
         e: &[f64; NX],
         coasted: bool,
+        last: usize,
         qp: &mut BoxQp,
         out: &mut [f64; K],
     ) -> Option<ExplicitOutcome> {
-        let slot = explicit_slot(e, coasted)?;
+        let slot = explicit_slot(e, coasted, last)?;
         let s = &EXPLICIT[slot];
         stored_tail(s, out);
         let mut d = [0.0; NX];
@@ -1573,7 +1653,7 @@ pub mod explicit {
                 hx += qp.h[a][b] * qp.x[b];
                 b += 1;
             }
-            half += qp.x[a] * (qp.g[a] + 0.5 * hx);
+            half += qp.x[a] * (s.gradient[a] + qp.g[a] + 0.5 * hx);
             a += 1;
         }
         let c = s.cost + 2.0 * half;

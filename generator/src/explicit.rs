@@ -4,19 +4,28 @@
 //! The online refinement rolls the nonlinear model out over the whole plan
 //! with Jacobians every step (26-60 us). But the index already names, for
 //! every cell of the relative state space, one stored plan sample; around
-//! that sample's state `s` and its plan tail everything the Gauss-Newton
+//! that sample's state `s` and its plan tail everything a Gauss-Newton
 //! window QP needs is fixed except the deviation `d = e - s`:
 //!
 //! ```text
-//!   min_x 1/2 x' H x + (g0 + F d)' x    lo <= x <= hi   (x = change of the window's inputs)
+//!   min_x 1/2 x' H x + (F d)' x    lo <= x <= hi   (x = change of the window's inputs)
 //! ```
 //!
-//! with H the condensed Hessian, g0 the gradient at the sample and F the
-//! sensitivity of that gradient to the deviation (the linearized model
-//! e_k = s_k + Phi_k d + S_k x is exact to first order in both). Online,
-//! the explicit tier evaluates g0 + F d (N x NX multiply-adds) and solves
-//! the box QP warm-started from the active set of the stored solution
-//! (d = 0): no RK4, no Jacobians.
+//! with H the condensed Hessian and F the sensitivity of the QP gradient
+//! to the deviation (the linearized model e_k = s_k + Phi_k d + S_k x is
+//! exact to first order in both). The cost is the online cost's weights on
+//! the deviation from the stored trajectory (tracking): at d = 0 the
+//! answer is the stored minimum-time plan itself. Why tracking, not the
+//! online cost itself (gradient g0 + F d): the stored plans are minimum-
+//! time plans, not minimizers of the quadratic cost, and a full
+//! Gauss-Newton step of that cost (no line search: there is no rollout to
+//! check it with) undid their separating manoeuvres; the closed loop with
+//! it did not settle A (5.9 mm off after 3 s, ideal sampling). Online, the
+//! explicit tier evaluates F d (N x NX multiply-adds) and solves the box
+//! QP warm-started from the active set of the stored solution (the stored
+//! inputs at a bound): no RK4, no Jacobians. The online cost's gradient
+//! g0 and a Gauss-Newton model of the cost in d are stored as well, for
+//! the cost the explicit tier predicts without a rollout.
 //!
 //! Why per referenced sample, not per cell or per plan sample: the index
 //! has 35 721 cells per schedule but names only about 3 700 (back to back)
@@ -66,9 +75,11 @@ pub struct ExplicitSample {
     pub state: Vec<f64>,
     /// Condensed Hessian, upper triangle row by row (N(N+1)/2).
     pub hessian: Vec<f64>,
-    /// QP gradient at zero deviation (N).
+    /// Gradient of the (halved) plan cost in the window inputs at zero
+    /// deviation (N): for the cost prediction only.
     pub gradient: Vec<f64>,
-    /// d gradient / d deviation, row a = input a (N x NX, row major).
+    /// d gradient / d deviation, row a = input a (N x NX, row major): the
+    /// tracking QP's whole gradient (see the module docs).
     pub sensitivity: Vec<f64>,
     /// Active set of the QP solution at zero deviation: -1 lower, +1 upper, 0 free.
     pub active: Vec<i8>,
@@ -79,8 +90,9 @@ pub struct ExplicitSample {
     /// of the explicit plan without a rollout.
     pub cost_gradient: Vec<f64>,
     pub cost_hessian: Vec<f64>,
-    /// The QP solution at zero deviation (clarabel), for checks.
-    pub solution: Vec<f64>,
+    /// Slot of the same plan's next sample, when stored (`NO_SLOT`
+    /// otherwise): the explicit tier's continuation candidate.
+    pub next: u16,
 }
 
 /// Every explicit sample and, per index cell / fine grid point, its slot
@@ -105,7 +117,7 @@ impl ExplicitTables {
     /// sample's source/plan/offset 5).
     pub fn bytes(&self, n: usize, nx: usize) -> usize {
         let doubles = nx + n * (n + 1) / 2 + n + n * nx + 1 + nx + nx * nx;
-        self.samples.len() * (8 * doubles + n + 5)
+        self.samples.len() * (8 * doubles + n + 7)
             + 2 * (self.index_slot.len()
                 + self.coasted_index_slot.len()
                 + self.fine_slot.len()
@@ -172,7 +184,7 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
     let mut ordered: Vec<((PlanSource, usize, usize), u16)> = keys.into_iter().collect();
     ordered.sort_by_key(|&(_, slot)| slot);
     let fine_dims = vec![tables.fine.axis.count; m];
-    let samples = ordered
+    let mut samples: Vec<ExplicitSample> = ordered
         .par_iter()
         .map(|&((source, plan, offset), _)| {
             let (ocp, u, start) = match source {
@@ -208,6 +220,12 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
             )
         })
         .collect();
+    let slot_by_key: BTreeMap<(PlanSource, usize, usize), u16> = ordered.iter().copied().collect();
+    for s in &mut samples {
+        s.next = *slot_by_key
+            .get(&(s.source, s.plan, s.offset + 1))
+            .unwrap_or(&NO_SLOT);
+    }
     ExplicitTables {
         samples,
         index_slot,
@@ -360,15 +378,13 @@ pub fn linearize(
         h[a][a] += w.r;
         g[a] += w.r * u[a];
     }
-    let lo: Vec<f64> = (0..n).map(|a| -u_max - u[a]).collect();
-    let hi: Vec<f64> = (0..n).map(|a| u_max - u[a]).collect();
-    let solution =
-        reference_box_qp(&h, &g, &lo, &hi).expect("window QP solves (H is positive definite)");
+    // The tracking QP's solution at zero deviation is x = 0 (the stored
+    // plan itself): inputs stored at a bound start on it.
     let active = (0..n)
         .map(|a| {
-            if solution[a] >= hi[a] - ACTIVE_TOLERANCE_T_PER_M {
+            if u[a] >= u_max - ACTIVE_TOLERANCE_T_PER_M {
                 1
-            } else if solution[a] <= lo[a] + ACTIVE_TOLERANCE_T_PER_M {
+            } else if u[a] <= -u_max + ACTIVE_TOLERANCE_T_PER_M {
                 -1
             } else {
                 0
@@ -387,7 +403,7 @@ pub fn linearize(
         cost,
         cost_gradient: cost_grad,
         cost_hessian: cost_hess.into_iter().flatten().collect(),
-        solution,
+        next: NO_SLOT,
     }
 }
 

@@ -1,18 +1,19 @@
 //! The explicit tier: a first answer with no model rollout.
 //!
 //! Every step: (1) look the state up (the fine end-game grid at rest, else
-//! the warm-start index) and take the stored sample it names; (2) the
-//! deviation d = e - (the sample's stored state); (3) the window QP's
-//! gradient g0 + F d from the stored sensitivities, its Hessian and the
-//! box of the stored plan's inputs; (4) the box QP, warm-started from the
-//! active set of the stored solution; (5) plan = stored inputs + the QP's
-//! step, clamped, then the stored tail. The linearization was done
+//! the warm-start index) and take the nearest of the stored samples named
+//! by its cell, the 2 NX neighbouring cells and the previous step's
+//! successor on its plan; (2) the deviation d = e - (the sample's stored
+//! state); (3) the window QP's gradient F d from the stored sensitivities,
+//! its Hessian and the box of the stored plan's inputs; (4) the box QP,
+//! warm-started from the active set of the stored solution; (5) plan =
+//! stored inputs + the QP's step, clamped, then the stored tail. The linearization was done
 //! offline (`capsule-mpc-generator`'s `explicit`); every loop here has a
 //! constant bound, and the QP stops at `QP_MAX_ITERATIONS`, so the
 //! operation count is bounded by `EXPLICIT_CERTIFIED_OPS`.
 
 use super::explicit_tables::*;
-use super::solver::{axis_nearest, clamp_u, index_cell, BoxQp, FINE_REST_SPEED_M_PER_S};
+use super::solver::{axis_nearest, clamp_u, BoxQp, FINE_REST_SPEED_M_PER_S};
 use super::spec::*;
 use super::tables::*;
 
@@ -32,22 +33,91 @@ pub struct ExplicitOutcome {
 
 /// The stored sample for relative state `e`: at rest on the fine grid,
 /// the fine plan's (the index's nearest sample there is a finished plan,
-/// which cannot separate capsules at rest); otherwise the index cell's.
-pub fn explicit_slot(e: &[f64; NX], coasted: bool) -> Option<usize> {
+/// which cannot separate capsules at rest); otherwise the nearest (in
+/// index cells) of the samples named by the cell of `e`, its 2 NX
+/// neighbours along the axes, and the successor of `last` (the previous
+/// step's sample; `usize::MAX`: none). Why not the cell's own sample
+/// alone: it was chosen by its cost from the cell's centre, and a cell is
+/// 0.1 m/s wide in speed; linearized around it, the deviation reached
+/// 0.1 m/s and consecutive steps jumped between plans.
+pub fn explicit_slot(e: &[f64; NX], coasted: bool, last: usize) -> Option<usize> {
     if let Some(slot) = fine_slot(e, coasted) {
         return Some(slot);
     }
-    let cell = index_cell(e)?;
     let slots = if coasted {
         &COASTED_EXPLICIT_INDEX_SLOT
     } else {
         &EXPLICIT_INDEX_SLOT
     };
-    let slot = *slots.get(cell)?;
-    if slot == NO_SLOT || slot as usize >= EXPLICIT_COUNT {
-        return None;
+    let mut idx = [0usize; NX];
+    let mut flat = 0usize;
+    let mut j = 0;
+    while j < NX {
+        let axis = axis_of(j);
+        idx[j] = axis_nearest(&axis, e[j])?;
+        flat = flat * axis.count + idx[j];
+        j += 1;
     }
-    Some(slot as usize)
+    let mut best = usize::MAX;
+    let mut best_distance = f64::INFINITY;
+    consider(e, slot_at(slots, flat), &mut best, &mut best_distance);
+    // Neighbours: stride of axis j = product of the later axes' counts.
+    let mut stride = 1usize;
+    let mut j = NX;
+    while j > 0 {
+        j -= 1;
+        let count = axis_of(j).count;
+        if idx[j] > 0 {
+            consider(e, slot_at(slots, flat - stride), &mut best, &mut best_distance);
+        }
+        if idx[j] + 1 < count {
+            consider(e, slot_at(slots, flat + stride), &mut best, &mut best_distance);
+        }
+        stride *= count;
+    }
+    if last < EXPLICIT_COUNT {
+        consider(e, EXPLICIT[last].next as usize, &mut best, &mut best_distance);
+    }
+    if best < EXPLICIT_COUNT {
+        Some(best)
+    } else {
+        None
+    }
+}
+
+fn axis_of(j: usize) -> Axis {
+    if j % 2 == 0 {
+        INDEX_POSITION_AXIS
+    } else {
+        INDEX_SPEED_AXIS
+    }
+}
+
+fn slot_at(slots: &[u16], flat: usize) -> usize {
+    match slots.get(flat) {
+        Some(&s) if s != NO_SLOT => s as usize,
+        _ => usize::MAX,
+    }
+}
+
+/// Keeps `slot` in `best` if its stored state is nearer to `e` (squared
+/// distance in index cells) than the best so far.
+fn consider(e: &[f64; NX], slot: usize, best: &mut usize, best_distance: &mut f64) {
+    if slot >= EXPLICIT_COUNT {
+        return;
+    }
+    let state = &EXPLICIT[slot].state;
+    let mut dist = 0.0;
+    let mut j = 0;
+    while j < NX {
+        let r = (e[j] - state[j]) / axis_of(j).step;
+        dist += r * r;
+        j += 1;
+    }
+    if dist < *best_distance {
+        *best_distance = dist;
+        *best = slot;
+    }
 }
 
 fn fine_slot(e: &[f64; NX], coasted: bool) -> Option<usize> {
@@ -105,7 +175,7 @@ pub fn load_qp(s: &ExplicitSample, d: &[f64; NX], u: &[f64; K], qp: &mut BoxQp) 
             idx += 1;
             b += 1;
         }
-        let mut g = s.gradient[a];
+        let mut g = 0.0;
         let mut j = 0;
         while j < NX {
             g += s.sensitivity[a][j] * d[j];
@@ -119,9 +189,16 @@ pub fn load_qp(s: &ExplicitSample, d: &[f64; NX], u: &[f64; K], qp: &mut BoxQp) 
 }
 
 /// The explicit plan for relative state `e` into `out` (`coasted`:
-/// constant sampling's tables); None outside the index and the fine grid.
-pub fn explicit_plan(e: &[f64; NX], coasted: bool, qp: &mut BoxQp, out: &mut [f64; K]) -> Option<ExplicitOutcome> {
-    let slot = explicit_slot(e, coasted)?;
+/// constant sampling's tables; `last`: the previous step's slot, or
+/// `usize::MAX`); None outside the index and the fine grid.
+pub fn explicit_plan(
+    e: &[f64; NX],
+    coasted: bool,
+    last: usize,
+    qp: &mut BoxQp,
+    out: &mut [f64; K],
+) -> Option<ExplicitOutcome> {
+    let slot = explicit_slot(e, coasted, last)?;
     let s = &EXPLICIT[slot];
     stored_tail(s, out);
     let mut d = [0.0; NX];
@@ -169,7 +246,7 @@ fn predicted_cost(s: &ExplicitSample, d: &[f64; NX], qp: &BoxQp) -> f64 {
             hx += qp.h[a][b] * qp.x[b];
             b += 1;
         }
-        half += qp.x[a] * (qp.g[a] + 0.5 * hx);
+        half += qp.x[a] * (s.gradient[a] + qp.g[a] + 0.5 * hx);
         a += 1;
     }
     let c = s.cost + 2.0 * half;

@@ -48,6 +48,8 @@ pub struct Solver {
     /// candidate for `plan` until the next `solve` or `adopt_explicit`.
     explicit_plan: [f64; K],
     explicit_ready: bool,
+    /// Slot of the explicit tier's last stored sample (usize::MAX: none).
+    explicit_slot: usize,
     /// Which tier produced `plan`.
     tier: Tier,
 }
@@ -137,6 +139,7 @@ impl Solver {
             schedule: Schedule::BACK_TO_BACK,
             explicit_plan: [0.0; K],
             explicit_ready: false,
+            explicit_slot: usize::MAX,
             tier: Tier::Refined,
         }
     }
@@ -151,6 +154,7 @@ impl Solver {
         self.plan = [0.0; K];
         self.has_plan = false;
         self.explicit_ready = false;
+        self.explicit_slot = usize::MAX;
     }
 
     /// The explicit tier from `e` (see the `explicit` module): the stored
@@ -167,9 +171,11 @@ impl Solver {
             max_qp_iterations: 0,
             tier: Tier::Explicit,
         };
-        match super::explicit::explicit_plan(e, self.schedule.coasted(), &mut self.qp, &mut self.explicit_plan) {
+        let coasted = self.schedule.coasted();
+        match super::explicit::explicit_plan(e, coasted, self.explicit_slot, &mut self.qp, &mut self.explicit_plan) {
             Some(out) => {
                 self.explicit_ready = true;
+                self.explicit_slot = out.slot;
                 report.cost = out.predicted_cost;
                 report.qp_iterations = out.qp_iterations;
                 report.max_qp_iterations = out.qp_iterations;
@@ -179,6 +185,7 @@ impl Solver {
             }
             None => {
                 self.explicit_ready = false;
+                self.explicit_slot = usize::MAX;
                 report.status = SolveStatus::OutOfRange;
                 report.cost = f64::INFINITY;
                 report.took_table_plan = false;
@@ -293,6 +300,9 @@ impl Solver {
         // first candidate on equal terms: taken only when its true cost is
         // lower; the SQP below then only accepts decreases, so the refined
         // plan never costs more than the explicit one.
+        // Whatever plan the refinement starts from (the shifted one or a
+        // stored tail) is its choice, unless the explicit plan wins below.
+        self.tier = Tier::Refined;
         if self.explicit_ready {
             self.explicit_ready = false;
             let c = rollout_cost_below(e, &self.explicit_plan, &self.schedule, cost);

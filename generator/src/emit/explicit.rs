@@ -46,6 +46,7 @@ pub fn emit_explicit_tables(
                 })
                 .collect::<Result<Vec<_>, EmitError>>()?;
             let active = s.active.iter().map(|&a| Literal::i8_unsuffixed(a));
+            let next = s.next;
             let cost = float("explicit cost", s.cost)?;
             let cost_gradient = floats("explicit cost gradient", &s.cost_gradient)?;
             let cost_hessian = s
@@ -67,6 +68,7 @@ pub fn emit_explicit_tables(
                     cost: #cost,
                     cost_gradient: [#(#cost_gradient),*],
                     cost_hessian: [#(#cost_hessian),*],
+                    next: #next,
                 }
             })
         })
@@ -88,9 +90,9 @@ pub fn emit_explicit_tables(
             /// Entries of an N x N symmetric matrix's upper triangle.
             pub const HESSIAN_LEN: usize = N * (N + 1) / 2;
             /// One stored sample's window QP as a function of the deviation
-            /// d = e - state: min 1/2 x'Hx + (gradient + sensitivity d)'x
-            /// over the window's input changes x (SI; the cost halved, as
-            /// the refinement's QP).
+            /// d = e - state: min 1/2 x'Hx + (sensitivity d)'x over the
+            /// window's input changes x (tracking the stored trajectory; SI,
+            /// the cost halved as in the refinement's QP).
             #[derive(Debug, Clone, Copy)]
             pub struct ExplicitSample {
                 /// Plan table: 0 back to back, 1 constant sampling, 2 fine,
@@ -103,7 +105,8 @@ pub fn emit_explicit_tables(
                 pub state: [f64; NX],
                 /// Condensed Hessian, upper triangle row by row.
                 pub hessian: [f64; HESSIAN_LEN],
-                /// QP gradient at zero deviation.
+                /// Gradient of the online cost in the window inputs at zero
+                /// deviation (for the cost prediction).
                 pub gradient: [f64; N],
                 /// d gradient / d deviation.
                 pub sensitivity: [[f64; NX]; N],
@@ -114,6 +117,8 @@ pub fn emit_explicit_tables(
                 /// Gauss-Newton model of that cost in d (halved, as the QP).
                 pub cost_gradient: [f64; NX],
                 pub cost_hessian: [[f64; NX]; NX],
+                /// Slot of the same plan's next sample (NO_SLOT: not stored).
+                pub next: u16,
             }
             /// Number of stored samples.
             pub const EXPLICIT_COUNT: usize = #count;
