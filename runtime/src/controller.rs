@@ -267,6 +267,17 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         &self.settings
     }
 
+    /// Changes when the refinement runs; allowed at any time (no state
+    /// depends on it). `Refine::None` needs explicit-tier data:
+    /// `BadSetting("refine")` for a solver without tables.
+    pub fn set_refine(&mut self, refine: Refine) -> Result<(), RuntimeError> {
+        if refine == Refine::None && !S::HAS_EXPLICIT_TIER {
+            return Err(RuntimeError::BadSetting("refine"));
+        }
+        self.settings.refine = refine;
+        Ok(())
+    }
+
     /// The final target, when set.
     pub fn target(&self) -> Option<&[f64; NX]> {
         self.has_target.then_some(&self.final_target)
