@@ -67,6 +67,10 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
     let ex = Percentiles::of(&explicit_ns);
     let re = Percentiles::of(&refined_ns);
     let max_iterations = iterations.iter().copied().max().unwrap_or(0);
+    let mut histogram = std::collections::BTreeMap::<u32, u64>::new();
+    for &it in &iterations {
+        *histogram.entry(it).or_default() += 1;
+    }
     let measured_max_ops = explicit_step_ops(N, NX, K, max_iterations as usize);
     let certified = explicit_tables::EXPLICIT_CERTIFIED_OPS;
     println!(
@@ -86,7 +90,7 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
         );
     }
     println!(
-        "explicit QP iterations: max {max_iterations} (cap {}); operations at that count {measured_max_ops}, certified bound {certified}",
+        "explicit QP iterations: max {max_iterations} (cap {}), histogram {histogram:?}; operations at that count {measured_max_ops}, certified bound {certified}",
         spec::QP_MAX_ITERATIONS
     );
     let peers = explicit_qp_peers(&starts, peer_count);
@@ -94,6 +98,7 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
         "explicit": {
             "median_ns": ex.median, "p99_ns": ex.p99, "max_ns": ex.max,
             "max_qp_iterations": max_iterations,
+            "qp_iteration_histogram": histogram.iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
             "ops_at_max_iterations": measured_max_ops,
             "certified_ops": certified,
             "what": "Solver::solve_explicit from the state one explicit sample later (look-up, deviation, gradient, warm-started box QP, clamp)",
