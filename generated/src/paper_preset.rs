@@ -411,7 +411,8 @@ pub mod solver {
         pub fn plan(&self) -> &[f64; K] {
             &self.plan
         }
-        /// Predicted relative states along the plan (valid after `solve`).
+        /// Predicted relative states along the refined plan (valid after a
+        /// `solve` whose report names `Tier::Refined`).
         pub fn predicted_states(&self) -> &[[f64; NX]; K + 1] {
             &self.states
         }
@@ -499,15 +500,14 @@ pub mod solver {
                 }
             }
             self.tier = Tier::Refined;
-            if self.explicit_ready {
-                self.explicit_ready = false;
-                let c = rollout_cost_below(e, &self.explicit_plan, &self.schedule, cost);
-                if c < cost {
-                    self.plan = self.explicit_plan;
-                    cost = c;
-                    fresh = false;
-                    self.tier = Tier::Explicit;
-                }
+            let mut explicit_pending = self.explicit_ready;
+            self.explicit_ready = false;
+            if explicit_pending && cost == f64::INFINITY {
+                self.plan = self.explicit_plan;
+                cost = rollout_cost(e, &self.plan, &self.schedule);
+                fresh = false;
+                self.tier = Tier::Explicit;
+                explicit_pending = false;
             }
             self.has_plan = true;
             let mut it = 0;
@@ -535,6 +535,14 @@ pub mod solver {
                     report.status = SolveStatus::IterationLimit;
                 }
                 it += 1;
+            }
+            if explicit_pending {
+                let c = rollout_cost_below(e, &self.explicit_plan, &self.schedule, cost);
+                if c < cost {
+                    self.plan = self.explicit_plan;
+                    cost = c;
+                    self.tier = Tier::Explicit;
+                }
             }
             report.cost = cost;
             report.tier = self.tier;
