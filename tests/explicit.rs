@@ -205,3 +205,84 @@ fn refinement_never_raises_the_true_cost() {
     eprintln!("{compared} states compared, refinement cheaper in {refined_won}");
     assert!(compared >= 200, "only {compared} states in range");
 }
+
+/// The emitted bound is the operation count at the QP's iteration cap, and
+/// every explicit step over the bench's states (seed 1, as `capsule-mpc
+/// bench`, plus the closed-loop states) stays within it: its iteration
+/// count never passes the cap, and the count it reports is the one its
+/// operations are bounded by.
+#[test]
+fn certified_operation_bound_covers_the_bench_states() {
+    use capsule_mpc_generator::explicit::explicit_step_ops;
+    let certified = explicit_tables::EXPLICIT_CERTIFIED_OPS;
+    assert_eq!(
+        certified,
+        explicit_step_ops(spec::N, spec::NX, spec::K, spec::QP_MAX_ITERATIONS)
+    );
+    let config = Config::embedded_default();
+    let states = capsule_mpc::bench::states::sample_states(&config, 20_000, 1).expect("states");
+    let (mut solved, mut most) = (0, 0u32);
+    for st in &states {
+        let mut s = solver::Solver::new();
+        if s.solve_explicit(&st.e).status == SolveStatus::OutOfRange {
+            continue;
+        }
+        s.adopt_explicit();
+        let e1 = solver::predict(&st.e, s.plan(), 1);
+        s.shift(1);
+        for r in [s.solve_explicit(&st.e), s.solve_explicit(&e1)] {
+            if r.status == SolveStatus::OutOfRange {
+                continue;
+            }
+            let ops = explicit_step_ops(spec::N, spec::NX, spec::K, r.max_qp_iterations as usize);
+            assert!(
+                ops <= certified,
+                "{} QP iterations: {ops} operations above the certified {certified}",
+                r.max_qp_iterations
+            );
+            most = most.max(r.max_qp_iterations);
+            solved += 1;
+        }
+    }
+    eprintln!("{solved} explicit steps, most QP iterations {most}");
+    assert!(solved > 20_000, "only {solved} explicit steps in range");
+    assert!(
+        most > 1,
+        "every QP took one iteration: the bound was not exercised"
+    );
+}
+
+/// The explicit tier alone in the closed loop, as measured (README
+/// "Explicit tier"): ideal sampling, no disturbance. A settles, later than
+/// with refinement (0.52 s); C ends within 2 mm but does not settle in 3 s.
+#[test]
+fn explicit_tier_alone_closed_loop_as_measured() {
+    use capsule_mpc_generator::config::RefineMode;
+    use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling, Scenario};
+    let config = Config::embedded_default();
+    let run_with = |scenario: Scenario, refine: RefineMode| {
+        let mut opts = RunOptions::new(&config, scenario.target_state(), Sampling::Ideal);
+        opts.refine = refine;
+        run(&config, &opts).expect("closed-loop run")
+    };
+    let a = run_with(Scenario::A, RefineMode::None);
+    let settle = a
+        .metrics
+        .settle_time_s
+        .expect("A settles with the explicit tier alone");
+    assert!(settle <= 0.95, "A settled at {settle} s");
+    let tiers = a.tier_cycles.expect("tier counts");
+    assert_eq!(tiers.refined, 0, "refine none ran the refinement");
+    let c = run_with(Scenario::C, RefineMode::None);
+    assert!(
+        c.metrics.final_position_error_m < 2e-3,
+        "C ends {} m off",
+        c.metrics.final_position_error_m
+    );
+    let refined = run_with(Scenario::A, RefineMode::PerSample);
+    let settle_refined = refined.metrics.settle_time_s.expect("A settles refined");
+    assert!(
+        settle_refined < settle,
+        "refinement no longer helps A: {settle_refined} s"
+    );
+}
