@@ -3,6 +3,9 @@
 //! the refinement never raises the true cost of the explicit plan; its
 //! operation bound covers what it does.
 
+// Per-component loops over the state mirror the math (e_j, d_j).
+#![allow(clippy::needless_range_loop)]
+
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::explicit::{
     build_explicit, dense_hessian, reference_box_qp, ExplicitTables, PlanSource,

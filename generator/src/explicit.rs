@@ -37,6 +37,9 @@
 //! flags. The fine end-game plans (from rest near the target) get a sample
 //! each at their start.
 
+// Index loops mirror the math (S[k][j], H[a][b]), as in `ocp.rs`.
+#![allow(clippy::needless_range_loop)]
+
 use crate::config::Config;
 use crate::model::Model;
 use crate::ocp::{rows_to_csc, upper_csc, Ocp};

@@ -3,7 +3,11 @@
 
 use crate::cli::{load_config, GenerateArgs};
 use anyhow::{bail, Context, Result};
-use capsule_mpc_generator::generate::{differences, emit_all, generate, write_atomically};
+use capsule_mpc_generator::emit::qp_max_iterations;
+use capsule_mpc_generator::explicit::explicit_step_ops;
+use capsule_mpc_generator::generate::{
+    differences, emit_all, generate, write_atomically, GeneratedFiles,
+};
 use capsule_mpc_generator::tables::{Progress, Tables};
 use capsule_mpc_sim::qp_map;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -92,5 +96,22 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         t.index.len(),
         table_bytes
     );
+    print_explicit_tier(&config, &files);
     Ok(())
+}
+
+/// The explicit tier's data and its certified worst case (emitted as
+/// `EXPLICIT_CERTIFIED_OPS`): operations of one step from the loop bounds
+/// with the QP at its iteration cap.
+fn print_explicit_tier(config: &capsule_mpc_generator::config::Config, files: &GeneratedFiles) {
+    let c = &config.controller;
+    let nx = 2 * config.capsule_count();
+    let cap = qp_max_iterations(c.horizon_steps);
+    println!(
+        "explicit tier: {} samples, {} bytes; certified worst case {} floating-point operations per step ({} QP iterations at most)",
+        files.explicit.samples.len(),
+        files.explicit.bytes(c.horizon_steps, nx),
+        explicit_step_ops(c.horizon_steps, nx, c.plan_steps, cap),
+        cap
+    );
 }
