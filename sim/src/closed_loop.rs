@@ -10,7 +10,7 @@ use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{Refine, SwitchingRule};
 use capsule_mpc_runtime::generated::{PlanSolver, Tier};
-use capsule_mpc_runtime::{Controller, RuntimeStatus};
+use capsule_mpc_runtime::{Controller, RuntimeError, RuntimeStatus};
 use std::time::Instant;
 
 /// Reference scenarios of the paper (targets in cm, see NOTES.md).
@@ -218,8 +218,13 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         settings.hold_enter_speed_m_per_s = 0.0;
     }
     let positions: Vec<f64> = x0.iter().step_by(2).copied().collect();
-    let mut ctl = Controller::<S, NX, K>::new(settings, &positions)
-        .map_err(|e| anyhow::anyhow!("controller settings: {e:?}"))?;
+    let mut ctl = Controller::<S, NX, K>::new(settings, &positions).map_err(|e| match e {
+        RuntimeError::BadSetting("refine") => anyhow::anyhow!(
+            "refine = none needs the explicit tier's data, and the {:?} preset has no tables: use refine once or per-sample",
+            opts.preset
+        ),
+        e => anyhow::anyhow!("controller settings: {e:?}"),
+    })?;
     set_target_or_explain(&mut ctl, &target, "target")?;
     let retarget: Option<(f64, [f64; NX])> = match &opts.retarget {
         Some(r) => {
