@@ -3,6 +3,7 @@
 
 use anyhow::{bail, Result};
 use capsule_mpc_generator::config::{Config, ConfigError, DisturbanceKind};
+use capsule_mpc_generator::generate::ControllerModule;
 use capsule_mpc_sim::closed_loop::{Preset, Sampling, Scenario};
 use capsule_mpc_sim::plant::DisturbanceLevel;
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -299,9 +300,14 @@ pub struct ReachArgs {
 
 #[derive(Debug, Clone, Args)]
 pub struct GenerateArgs {
-    /// Config file (TOML); the embedded paper config when absent.
+    /// Config file (TOML); the module's embedded config when absent (the
+    /// paper's two capsules for `controller`, configs/three-capsules.toml
+    /// for `three-capsules`).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
+    /// Which compiled controller module of the crate to generate.
+    #[arg(long, value_enum, default_value = "controller")]
+    pub module: ModuleArg,
     /// Output directory of the generated crate.
     #[arg(long, value_name = "DIR", default_value = "generated")]
     pub out: PathBuf,
@@ -401,6 +407,25 @@ impl From<RefineArg> for capsule_mpc_generator::config::RefineMode {
             RefineArg::None => RefineMode::None,
             RefineArg::Once => RefineMode::Once,
             RefineArg::PerSample => RefineMode::PerSample,
+        }
+    }
+}
+
+/// A controller module of the generated crate on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModuleArg {
+    /// `controller`: the default two-capsule controller (and the C ABI's);
+    /// also writes the paper preset and the QP iteration map.
+    Controller,
+    /// `three_capsules`: the three-capsule preset.
+    ThreeCapsules,
+}
+
+impl From<ModuleArg> for ControllerModule {
+    fn from(m: ModuleArg) -> Self {
+        match m {
+            ModuleArg::Controller => ControllerModule::Controller,
+            ModuleArg::ThreeCapsules => ControllerModule::ThreeCapsules,
         }
     }
 }

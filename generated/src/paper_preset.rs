@@ -59,6 +59,10 @@ pub mod spec {
     pub const WORKSPACE_MAX_M: f64 = 0.06;
     /// SHA-256 of the config this module was generated from.
     pub const CONFIG_SHA256: &str = "59289aef8cbc30bb7eac13f243fb4990efebbb228fa922207b6b49da121bbb2d";
+    /// SHA-256 of the parts of that config that shape this solver
+    /// (see `tables::solver_hash` in the generator): a config runs
+    /// on this module exactly when its solver hash is this one.
+    pub const SOLVER_SHA256: &str = "af6969bfd341a99ff18c6d33430f0388962ce372848ccee0c597c0d376dcb2dc";
     /// Drag acceleration of capsule `i` at speed `v` (m/s^2) and its slope d a / d v.
     #[inline]
     pub fn drag(i: usize, v: f64) -> (f64, f64) {
@@ -106,7 +110,7 @@ pub mod tables {
         count: 1usize,
     };
     /// Bytes of table data in this module.
-    pub const TABLE_BYTES: usize = 18usize;
+    pub const TABLE_BYTES: usize = 26usize;
     /// Gradient plans, T/m.
     pub static PLAN_U: [[f64; K]; PLAN_COUNT] = [];
     /// Whether each plan reaches its target.
@@ -138,14 +142,17 @@ pub mod tables {
     pub static FIRST_LEG: [u16; 1usize] = [65535u16];
     /// Per lattice displacement: the chain's summed minimum time, s.
     pub static CHAIN_TIME_S: [f64; 1usize] = [f64::INFINITY];
-    /// Per index cell: plan << 16 | step offset.
+    /// Kept cells of the sparse warm-start index: ascending row-major
+    /// numbers over the index axes (e1, v1, e2, v2, ...).
+    pub static INDEX_CELLS: [u64; 1usize] = [0u64];
+    /// Per kept cell: plan << 16 | step offset.
     pub static INDEX: [u32; 1usize] = [4294967295u32];
     /// Constant sampling's tables: the same grid, plans solved with
     /// a zero-gradient coast of COAST_S after every sample.
     pub const COAST_S: f64 = 0.0;
     pub static COASTED_PLAN_U: [[f64; K]; PLAN_COUNT] = [];
     pub static COASTED_INDEX: [u32; 1usize] = [4294967295u32];
-    /// Per index cell: most QP iterations measured offline (empty
+    /// Per kept index cell: most QP iterations measured offline (empty
     /// when not measured; see `qp_iteration_map.rs`).
     pub static QP_ITERATION_MAP: &[u8] = crate::qp_iteration_map::PAPER_PRESET;
 }
@@ -192,20 +199,21 @@ pub mod explicit_tables {
     /// Slot value of a cell without a sample.
     pub const NO_SLOT: u16 = 65535u16;
     pub static EXPLICIT: [ExplicitSample; EXPLICIT_COUNT] = [];
-    /// Per warm-start index cell: the slot of its sample (back to
-    /// back, and constant sampling's).
-    pub static EXPLICIT_INDEX_SLOT: [u16; 1usize] = [65535u16];
-    pub static COASTED_EXPLICIT_INDEX_SLOT: [u16; 1usize] = [65535u16];
+    /// Per kept cell of the sparse warm-start index (parallel to
+    /// `tables::INDEX_CELLS`; empty without an explicit tier): the
+    /// slot of its sample (back to back, and constant sampling's).
+    pub static EXPLICIT_INDEX_SLOT: [u16; 0usize] = [];
+    pub static COASTED_EXPLICIT_INDEX_SLOT: [u16; 0usize] = [];
     /// Per fine grid point: the slot of its plan's first sample.
     pub static FINE_EXPLICIT_SLOT: [u16; 0usize] = [];
     pub static COASTED_FINE_EXPLICIT_SLOT: [u16; 0usize] = [];
     /// Bytes of the arrays above.
-    pub const EXPLICIT_TABLE_BYTES: usize = 4usize;
+    pub const EXPLICIT_TABLE_BYTES: usize = 0usize;
     /// Certified worst case of one explicit step: floating-point
     /// operations counted from the loop bounds with the QP at its
     /// iteration cap (`QP_MAX_ITERATIONS`), every iteration at its
     /// worst (all variables free, the factor rebuilt).
-    pub const EXPLICIT_CERTIFIED_OPS: u64 = 36652u64;
+    pub const EXPLICIT_CERTIFIED_OPS: u64 = 36822u64;
 }
 pub mod solver {
     //! Fixed-size online solver: refines a long plan with Gauss-Newton SQP steps
@@ -952,16 +960,52 @@ pub mod solver {
         }
         Some(libm::round(f) as usize)
     }
-    /// The warm-start index cell of relative state `e`; None outside the index.
-    pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
-        let mut flat = 0usize;
+    /// Bisection probes that find any cell among `INDEX_CELLS` (2^64 > any count).
+    const INDEX_PROBES: usize = 64;
+    /// The row-major number of `e`'s cell on the (dense) warm-start index grid
+    /// (position, speed axes alternating, the last axis fastest); None outside
+    /// the grid.
+    pub fn index_flat(e: &[f64; NX]) -> Option<u64> {
+        let mut flat = 0u64;
         let mut j = 0;
         while j < NX {
             let axis = if j % 2 == 0 { &INDEX_POSITION_AXIS } else { &INDEX_SPEED_AXIS };
-            flat = flat * axis.count + axis_nearest(axis, e[j])?;
+            flat = flat * axis.count as u64 + axis_nearest(axis, e[j])? as u64;
             j += 1;
         }
         Some(flat)
+    }
+    /// The first position in `INDEX_CELLS[lo..hi]` whose cell number is not
+    /// below `flat` (`hi` if none), by bisection: `INDEX_PROBES` probes at most.
+    pub fn index_lower_bound(flat: u64, lo: usize, hi: usize) -> usize {
+        let (mut lo, mut hi) = (
+            lo,
+            if hi < INDEX_CELLS.len() { hi } else { INDEX_CELLS.len() },
+        );
+        let mut probes = 0;
+        while lo < hi && probes < INDEX_PROBES {
+            let mid = lo + (hi - lo) / 2;
+            if INDEX_CELLS[mid] < flat {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+            probes += 1;
+        }
+        lo
+    }
+    /// The slot among the kept cells of the sparse warm-start index
+    /// (`INDEX_CELLS`) of the cell numbered `flat` (see `index_flat`); None
+    /// when no stored plan passes near that cell (it is not kept).
+    pub fn kept_slot(flat: u64) -> Option<usize> {
+        let lo = index_lower_bound(flat, 0, INDEX_CELLS.len());
+        if lo < INDEX_CELLS.len() && INDEX_CELLS[lo] == flat { Some(lo) } else { None }
+    }
+    /// The slot of `e`'s cell among the kept cells of the sparse warm-start
+    /// index (`INDEX_CELLS`); None outside the index grid or in a cell no
+    /// stored plan passes near.
+    pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
+        kept_slot(index_flat(e)?)
     }
     /// Most QP iterations measured offline in the index cell of `e` (0: not
     /// measured, or outside the index).
@@ -1437,7 +1481,9 @@ pub mod explicit {
     //! constant bound, and the QP stops at `QP_MAX_ITERATIONS`, so the
     //! operation count is bounded by `EXPLICIT_CERTIFIED_OPS`.
     use super::explicit_tables::*;
-    use super::solver::{axis_nearest, clamp_u, BoxQp, FINE_REST_SPEED_M_PER_S};
+    use super::solver::{
+        axis_nearest, clamp_u, index_lower_bound, BoxQp, FINE_REST_SPEED_M_PER_S,
+    };
     use super::spec::*;
     use super::tables::*;
     /// What one explicit step produced besides the plan.
@@ -1457,7 +1503,8 @@ pub mod explicit {
     /// the fine plan's (the index's nearest sample there is a finished plan,
     /// which cannot separate capsules at rest); otherwise the nearest (in
     /// index cells) of the samples named by the cell of `e`, its 2 NX
-    /// neighbours along the axes, and the successor of `last` (the previous
+    /// neighbours along the axes (those the sparse index keeps; a cell is
+    /// found by bisection over `INDEX_CELLS`), and the successor of `last` (the previous
     /// step's sample; `usize::MAX`: none). Why not the cell's own sample
     /// alone: it was chosen by its cost from the cell's centre, and a cell is
     /// 0.1 m/s wide in speed; linearized around it, the deviation reached
@@ -1472,39 +1519,38 @@ pub mod explicit {
             &EXPLICIT_INDEX_SLOT
         };
         let mut idx = [0usize; NX];
-        let mut flat = 0usize;
+        let mut flat = 0u64;
         let mut j = 0;
         while j < NX {
             let axis = axis_of(j);
             idx[j] = axis_nearest(&axis, e[j])?;
-            flat = flat * axis.count + idx[j];
+            flat = flat * axis.count as u64 + idx[j] as u64;
             j += 1;
         }
         let mut best = usize::MAX;
         let mut best_distance = f64::INFINITY;
-        consider(e, slot_at(slots, flat), &mut best, &mut best_distance);
-        let mut stride = 1usize;
+        let cells = INDEX_CELLS.len();
+        let split = index_lower_bound(flat, 0, cells);
+        consider(
+            e,
+            slot_of_cell(slots, flat, split, cells),
+            &mut best,
+            &mut best_distance,
+        );
+        let mut stride = 1u64;
         let mut j = NX;
         while j > 0 {
             j -= 1;
             let count = axis_of(j).count;
             if idx[j] > 0 {
-                consider(
-                    e,
-                    slot_at(slots, flat - stride),
-                    &mut best,
-                    &mut best_distance,
-                );
+                let slot = slot_of_cell(slots, flat - stride, 0, split);
+                consider(e, slot, &mut best, &mut best_distance);
             }
             if idx[j] + 1 < count {
-                consider(
-                    e,
-                    slot_at(slots, flat + stride),
-                    &mut best,
-                    &mut best_distance,
-                );
+                let slot = slot_of_cell(slots, flat + stride, split, cells);
+                consider(e, slot, &mut best, &mut best_distance);
             }
-            stride *= count;
+            stride *= count as u64;
         }
         if last < EXPLICIT_COUNT {
             consider(e, EXPLICIT[last].next as usize, &mut best, &mut best_distance);
@@ -1514,8 +1560,15 @@ pub mod explicit {
     fn axis_of(j: usize) -> Axis {
         if j % 2 == 0 { INDEX_POSITION_AXIS } else { INDEX_SPEED_AXIS }
     }
-    fn slot_at(slots: &[u16], flat: usize) -> usize {
-        match slots.get(flat) {
+    /// The explicit slot of the cell numbered `flat` (row-major on the dense
+    /// grid) if it is kept, looked for among `INDEX_CELLS[lo..hi]`;
+    /// `usize::MAX` otherwise.
+    fn slot_of_cell(slots: &[u16], flat: u64, lo: usize, hi: usize) -> usize {
+        let kept = index_lower_bound(flat, lo, hi);
+        if kept >= hi || kept >= INDEX_CELLS.len() || INDEX_CELLS[kept] != flat {
+            return usize::MAX;
+        }
+        match slots.get(kept) {
             Some(&s) if s != NO_SLOT => s as usize,
             _ => usize::MAX,
         }

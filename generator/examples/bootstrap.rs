@@ -2,15 +2,18 @@
 //! template's interface changed and the `capsule-mpc` binary (which links
 //! the old generated crate) cannot be built:
 //!
-//!     cargo run --release -p capsule-mpc-generator --example bootstrap [CONFIG] [OUT] [--reuse-tables]
+//!     cargo run --release -p capsule-mpc-generator --example bootstrap [CONFIG] [OUT] [--reuse-tables] [--three-capsules]
 //!
-//! (`--reuse-tables`: re-emit from OUT/tables.bin when only the templates
-//! changed)
+//! (`--reuse-tables`: re-emit from the module's tables in OUT when only the
+//! templates changed; `--three-capsules`: the `three_capsules` module, from
+//! configs/three-capsules.toml unless CONFIG is given)
 //! then `cargo build --release` and `capsule-mpc generate --reuse-tables`
 //! to measure the QP iteration map.
 
 use capsule_mpc_generator::config::Config;
-use capsule_mpc_generator::generate::{emit_all, generate, write_atomically};
+use capsule_mpc_generator::generate::{
+    emit_module_files, generate_module, write_atomically, ControllerModule,
+};
 use capsule_mpc_generator::tables::{Progress, Tables};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -47,10 +50,14 @@ impl Progress for Log {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let all: Vec<String> = std::env::args().skip(1).collect();
     let reuse = all.iter().any(|a| a == "--reuse-tables");
-    let mut args = all.into_iter().filter(|a| a != "--reuse-tables");
+    let module = match all.iter().any(|a| a == "--three-capsules") {
+        true => ControllerModule::ThreeCapsules,
+        false => ControllerModule::Controller,
+    };
+    let mut args = all.into_iter().filter(|a| !a.starts_with("--"));
     let config = match args.next() {
         Some(path) => Config::from_file(std::path::Path::new(&path))?,
-        None => Config::embedded_default(),
+        None => module.default_config(),
     };
     let out = PathBuf::from(args.next().unwrap_or_else(|| "generated".to_string()));
     let log = Log {
@@ -59,10 +66,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         started: Instant::now(),
     };
     let files = if reuse {
-        let tables = Tables::read(&out.join("tables.bin"), &config)?;
-        emit_all(&config, tables)?
+        let tables = Tables::read(&out.join(module.tables_path()), &config)?;
+        emit_module_files(module, &config, tables)?
     } else {
-        generate(&config, &log)?
+        generate_module(module, &config, &log)?
     };
     write_atomically(&out, &files)?;
     let t = &files.tables;

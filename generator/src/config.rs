@@ -9,6 +9,8 @@ use std::path::Path;
 
 /// The embedded default: Table I of the paper with the product's controller.
 pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../configs/paper.toml");
+/// The shipped three-capsule preset (spheres of 1.5, 2.2 and 3.0 mm).
+pub const THREE_CAPSULES_CONFIG_TOML: &str = include_str!("../../configs/three-capsules.toml");
 
 /// Largest number of capsules a config may describe (the emitted solver is
 /// fixed-size; more capsules than this is almost certainly a typo).
@@ -300,6 +302,33 @@ pub struct GridConfig {
     pub starts: usize,
     /// SQP iterations per start.
     pub sqp_iterations: usize,
+    /// Half-width of the end game's fine grid of small moves from rest, m
+    /// ([`DEFAULT_FINE_RANGE_M`] when absent). Absent fields are not
+    /// serialized, so configs without them keep their hash.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fine_range_m: Option<f64>,
+    /// Spacing of the fine grid, m ([`DEFAULT_FINE_STEP_M`] when absent).
+    /// The fine grid has (2 range / step + 1)^M plans per schedule: coarser
+    /// for M >= 3 keeps generation short.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fine_step_m: Option<f64>,
+}
+
+/// Fine grid half-width by default, m: the end game covers errors up to
+/// 3 mm, three times the settle band.
+pub const DEFAULT_FINE_RANGE_M: f64 = 3.0e-3;
+/// Fine grid spacing by default, m.
+pub const DEFAULT_FINE_STEP_M: f64 = 0.5e-3;
+
+impl GridConfig {
+    /// The fine grid's half-width, m.
+    pub fn fine_range_m(&self) -> f64 {
+        self.fine_range_m.unwrap_or(DEFAULT_FINE_RANGE_M)
+    }
+    /// The fine grid's spacing, m.
+    pub fn fine_step_m(&self) -> f64 {
+        self.fine_step_m.unwrap_or(DEFAULT_FINE_STEP_M)
+    }
 }
 
 impl Default for GridConfig {
@@ -309,6 +338,8 @@ impl Default for GridConfig {
             position_step_m: 0.005,
             starts: 12,
             sqp_iterations: 40,
+            fine_range_m: None,
+            fine_step_m: None,
         }
     }
 }
@@ -460,6 +491,11 @@ impl Config {
     }
 
     /// The embedded default config.
+    pub fn embedded_three_capsules() -> Config {
+        Config::from_toml_str(THREE_CAPSULES_CONFIG_TOML)
+            .expect("embedded three-capsule config is valid")
+    }
+
     pub fn embedded_default() -> Config {
         Config::from_toml_str(DEFAULT_CONFIG_TOML).expect("embedded default config is valid")
     }
@@ -671,6 +707,26 @@ impl Config {
             return Err(invalid(
                 "grid.position_step_m",
                 "gives more than 201 points per axis; use a larger step",
+            ));
+        }
+        check_range(
+            "grid.fine_range_m",
+            g.fine_range_m(),
+            0.0,
+            true,
+            g.position_range_m,
+        )?;
+        check_range(
+            "grid.fine_step_m",
+            g.fine_step_m(),
+            0.0,
+            true,
+            g.fine_range_m(),
+        )?;
+        if 2.0 * g.fine_range_m() / g.fine_step_m() > 40.0 {
+            return Err(invalid(
+                "grid.fine_step_m",
+                "gives more than 41 fine points per axis; use a larger step",
             ));
         }
         if !(1..=256).contains(&g.starts) {

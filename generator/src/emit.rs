@@ -59,7 +59,8 @@ pub struct EmitInput<'a> {
     /// Path of this module's per-cell QP iteration map in
     /// `qp_iteration_map.rs` (see [`emit_qp_iteration_map`]).
     pub qp_map_ident: &'a str,
-    /// The explicit tier's data (None without tables).
+    /// The explicit tier's data (None: no explicit tier, as for the paper
+    /// preset, which has no tables, and `three_capsules`).
     pub explicit: Option<&'a crate::explicit::ExplicitTables>,
 }
 
@@ -156,6 +157,7 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
     let noise = float("position_noise_m", config.measurement.position_noise_m)?;
     let sigma = float("switching_sigma", c.switching_sigma)?;
     let hash = hex(&input.config_hash);
+    let solver_hash = hex(&crate::tables::solver_hash(config));
     let drag_arms = model
         .capsules
         .iter()
@@ -230,6 +232,10 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
             pub const WORKSPACE_MAX_M: f64 = #ws_max;
             /// SHA-256 of the config this module was generated from.
             pub const CONFIG_SHA256: &str = #hash;
+            /// SHA-256 of the parts of that config that shape this solver
+            /// (see `tables::solver_hash` in the generator): a config runs
+            /// on this module exactly when its solver hash is this one.
+            pub const SOLVER_SHA256: &str = #solver_hash;
 
             /// Drag acceleration of capsule `i` at speed `v` (m/s^2) and its slope d a / d v.
             #[inline]
@@ -242,15 +248,18 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
         }
     };
 
-    let tables = emit_tables(input.tables, k, m, &format_ident!("{}", input.qp_map_ident))?;
+    let tables = emit_tables(input.tables, k, &format_ident!("{}", input.qp_map_ident))?;
     let solver_file = syn::parse_file(SOLVER_TEMPLATE)
         .map_err(|e| EmitError::Parse(format!("solver template: {e}")))?;
     let solver_attrs = &solver_file.attrs;
     let solver_items = &solver_file.items;
-    let cells = input.tables.map_or(1, |t| t.index.len());
-    let fine_count = input.tables.map_or(0, |t| t.fine.plans.len());
-    let explicit_tables =
-        explicit::emit_explicit_tables(input.explicit, n, nx, k, qp_max, cells, fine_count)?;
+    if let (Some(e), Some(t)) = (input.explicit, input.tables) {
+        // The slots parallel the sparse index's kept cells and the fine grid.
+        debug_assert_eq!(e.index_slot.len(), t.index_cells.len());
+        debug_assert_eq!(e.coasted_index_slot.len(), t.index_cells.len());
+        debug_assert_eq!(e.fine_slot.len(), t.fine.plans.len());
+    }
+    let explicit_tables = explicit::emit_explicit_tables(input.explicit, n, nx, k, qp_max)?;
     let explicit_file = syn::parse_file(EXPLICIT_TEMPLATE)
         .map_err(|e| EmitError::Parse(format!("explicit template: {e}")))?;
     let explicit_attrs = &explicit_file.attrs;
@@ -285,7 +294,6 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
 fn emit_tables(
     tables: Option<&Tables>,
     k: usize,
-    m: usize,
     qp_map: &proc_macro2::Ident,
 ) -> Result<TokenStream, EmitError> {
     let empty_axis = Axis {
@@ -383,11 +391,17 @@ fn emit_tables(
         // One dummy cell pointing at no plan (plan index past PLAN_COUNT).
         None => (Vec::new(), Vec::new(), vec![u32::MAX]),
     };
+    let index_cells: Vec<u64> = match tables {
+        Some(t) => t.index_cells.clone(),
+        // The one dummy cell: the centre of the 1-cell grid.
+        None => vec![0],
+    };
     let plan_count = plan_rows.len();
     let cells = index.len();
-    let expected_cells = pos_axis.count.pow(m as u32) * spd_axis.count.pow(m as u32);
-    debug_assert_eq!(cells, expected_cells.max(1));
+    debug_assert_eq!(cells, index_cells.len());
+    debug_assert_eq!(coasted_index.len(), cells);
     let table_bytes = 2 * (plan_count * k * 8 + cells * 4 + fine_count * k * 8)
+        + cells * 8
         + plan_count * 9
         + fine_count
         + leg_cells * 10;
@@ -432,14 +446,17 @@ fn emit_tables(
             pub static FIRST_LEG: [u16; #leg_cells] = [#(#first_legs),*];
             /// Per lattice displacement: the chain's summed minimum time, s.
             pub static CHAIN_TIME_S: [f64; #leg_cells] = [#(#chain_times),*];
-            /// Per index cell: plan << 16 | step offset.
+            /// Kept cells of the sparse warm-start index: ascending row-major
+            /// numbers over the index axes (e1, v1, e2, v2, ...).
+            pub static INDEX_CELLS: [u64; #cells] = [#(#index_cells),*];
+            /// Per kept cell: plan << 16 | step offset.
             pub static INDEX: [u32; #cells] = [#(#index),*];
             /// Constant sampling's tables: the same grid, plans solved with
             /// a zero-gradient coast of COAST_S after every sample.
             pub const COAST_S: f64 = #coast_s;
             pub static COASTED_PLAN_U: [[f64; K]; PLAN_COUNT] = [#(#coasted_rows),*];
             pub static COASTED_INDEX: [u32; #cells] = [#(#coasted_index),*];
-            /// Per index cell: most QP iterations measured offline (empty
+            /// Per kept index cell: most QP iterations measured offline (empty
             /// when not measured; see `qp_iteration_map.rs`).
             pub static QP_ITERATION_MAP: &[u8] = crate::qp_iteration_map::#qp_map;
         }
@@ -467,6 +484,9 @@ pub fn emit_qp_iteration_map(controller: Option<&[u8]>) -> Result<String, EmitEr
         pub const CONTROLLER_MAX: u8 = #max;
         /// The paper preset has no index cells.
         pub static PAPER_PRESET: &[u8] = &[];
+        /// The three-capsule preset's map is not measured (its cells are
+        /// not the benchmarked controller's).
+        pub static THREE_CAPSULES: &[u8] = &[];
     };
     let file: syn::File =
         syn::parse2(tokens).map_err(|e| EmitError::Parse(format!("QP iteration map: {e}")))?;

@@ -100,7 +100,7 @@ pub struct ExplicitSample {
 
 /// Every explicit sample and, per index cell / fine grid point, its slot
 /// (`NO_SLOT`: none).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct ExplicitTables {
     pub samples: Vec<ExplicitSample>,
     pub index_slot: Vec<u16>,
@@ -579,7 +579,14 @@ pub fn explicit_step_ops(n: usize, nx: usize, k: usize, qp_iterations: usize) ->
     let (n, nx, k) = (n as u64, nx as u64, k as u64);
     // Index look-up: per axis a subtraction, a division, two compares, a
     // rounding, a multiply-add; the fine-grid test likewise per capsule.
+    // The kept cells of the sparse index are found by bisection over
+    // integer cell numbers (at most 64 integer compares per cell, 2 NX + 1
+    // cells): no floating-point operations.
     let lookup = 6 * nx + 6 * (nx / 2) + 2 * nx;
+    // The nearest of the candidates (the cell's sample, its 2 NX axis
+    // neighbours', the last sample's successor): per candidate and axis a
+    // subtraction, a division, a multiply-add, and one compare.
+    let candidates = (2 * nx + 2) * (4 * nx + 1);
     // Deviation, gradient g0 + F d, bounds, Hessian copy, warm start.
     let setup = nx + 2 * n * nx + 2 * n + n * n + 2 * n;
     // One active-set iteration, worst case.
@@ -600,7 +607,7 @@ pub fn explicit_step_ops(n: usize, nx: usize, k: usize, qp_iterations: usize) ->
         collect + factor + newton_rhs + substitutions + ratio + update + multipliers + n;
     // Plan assembly (window clamp, tail copy) and the predicted cost.
     let finish = 3 * n + k + (nx * nx * 2 + nx * 2 + 2 * n * nx + n * n * 2 + 2 * n + 4);
-    lookup + setup + qp_iterations as u64 * per_iteration + finish
+    lookup + candidates + setup + qp_iterations as u64 * per_iteration + finish
 }
 
 #[cfg(test)]

@@ -56,7 +56,8 @@ fn io_err(path: &Path, e: std::io::Error) -> GenerateError {
 pub struct GeneratedFiles {
     pub files: Vec<(PathBuf, Vec<u8>)>,
     pub tables: Tables,
-    /// The explicit tier's data emitted into the controller module.
+    /// The explicit tier's data emitted into the module (empty for modules
+    /// without an explicit tier: `three_capsules`).
     pub explicit: ExplicitTables,
 }
 
@@ -89,13 +90,119 @@ impl GeneratedFiles {
     }
 }
 
-/// Builds the tables and emits every file of the generated crate.
-pub fn generate(config: &Config, progress: &dyn Progress) -> Result<GeneratedFiles, GenerateError> {
-    let tables = build_tables(config, progress);
-    emit_all(config, tables)
+/// A product controller module of the generated crate. Each is compiled
+/// into every binary; a run picks the one whose solver hash matches its
+/// config (see `tables::solver_hash`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ControllerModule {
+    /// `controller`: the default two-capsule config (and the C ABI's).
+    Controller,
+    /// `three_capsules`: the three-capsule preset.
+    ThreeCapsules,
 }
 
-/// Emits every file from already-built tables.
+impl ControllerModule {
+    pub const ALL: [ControllerModule; 2] = [
+        ControllerModule::Controller,
+        ControllerModule::ThreeCapsules,
+    ];
+
+    /// The module's name in the generated crate.
+    pub fn module_name(self) -> &'static str {
+        match self {
+            ControllerModule::Controller => "controller",
+            ControllerModule::ThreeCapsules => "three_capsules",
+        }
+    }
+
+    /// The name on the command line (`generate --module`).
+    pub fn cli_name(self) -> &'static str {
+        match self {
+            ControllerModule::Controller => "controller",
+            ControllerModule::ThreeCapsules => "three-capsules",
+        }
+    }
+
+    /// The config the module is generated from unless `--config` says
+    /// otherwise (embedded in the binary).
+    pub fn default_config(self) -> Config {
+        match self {
+            ControllerModule::Controller => Config::embedded_default(),
+            ControllerModule::ThreeCapsules => Config::embedded_three_capsules(),
+        }
+    }
+
+    /// The emitted module, relative to the crate.
+    pub fn source_path(self) -> String {
+        format!("src/{}.rs", self.module_name())
+    }
+
+    /// The module's tables file, relative to the crate.
+    pub fn tables_path(self) -> &'static str {
+        match self {
+            ControllerModule::Controller => "tables.bin",
+            ControllerModule::ThreeCapsules => "three_capsules.tables.bin",
+        }
+    }
+
+    /// Its entry in `qp_iteration_map.rs`.
+    fn qp_map_ident(self) -> &'static str {
+        match self {
+            ControllerModule::Controller => "CONTROLLER",
+            ControllerModule::ThreeCapsules => "THREE_CAPSULES",
+        }
+    }
+}
+
+/// Builds the tables and emits every file of the generated crate.
+pub fn generate(config: &Config, progress: &dyn Progress) -> Result<GeneratedFiles, GenerateError> {
+    generate_module(ControllerModule::Controller, config, progress)
+}
+
+/// Builds the tables of `module` and emits its files.
+pub fn generate_module(
+    module: ControllerModule,
+    config: &Config,
+    progress: &dyn Progress,
+) -> Result<GeneratedFiles, GenerateError> {
+    let tables = build_tables(config, progress);
+    emit_module_files(module, config, tables)
+}
+
+/// Emits the files of `module` from already-built tables: for the default
+/// `controller` every file of the crate (the paper preset, derived from its
+/// config, the static part and the QP iteration map included); for the
+/// others their module and tables only.
+pub fn emit_module_files(
+    module: ControllerModule,
+    config: &Config,
+    tables: Tables,
+) -> Result<GeneratedFiles, GenerateError> {
+    if module == ControllerModule::Controller {
+        return emit_all(config, tables);
+    }
+    let source = emit_module(&EmitInput {
+        config,
+        tables: Some(&tables),
+        config_hash: config_hash(config),
+        qp_map_ident: module.qp_map_ident(),
+        // No explicit tier outside the default controller: the explicit
+        // generator addresses samples with u16 slots (at most 65 535) and
+        // the M = 3 data would be large; `refine = none` is refused there.
+        explicit: None,
+    })?;
+    let files = vec![
+        (PathBuf::from(module.source_path()), source.into_bytes()),
+        (PathBuf::from(module.tables_path()), tables.to_bytes()),
+    ];
+    Ok(GeneratedFiles {
+        files,
+        tables,
+        explicit: ExplicitTables::default(),
+    })
+}
+
+/// Emits every file from already-built tables of the default `controller`.
 pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, GenerateError> {
     // Derived from the tables at emission (not stored in tables.bin): the
     // linearization is cheap next to the tables and needs no format change.
@@ -104,7 +211,7 @@ pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, Gener
         config,
         tables: Some(&tables),
         config_hash: config_hash(config),
-        qp_map_ident: "CONTROLLER",
+        qp_map_ident: ControllerModule::Controller.qp_map_ident(),
         explicit: Some(&explicit),
     })?;
     let paper = paper_preset(config);

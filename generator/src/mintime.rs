@@ -38,18 +38,11 @@ pub const PLAN_BAND: Band = Band {
 };
 
 /// The band the fine plans (moves of a few mm near the target, see
-/// `FINE_RANGE_M`) end in: a tenth of the settle band's position.
+/// `grid.fine_range_m`) end in: a tenth of the settle band's position.
 pub const FINE_PLAN_BAND: Band = Band {
     position_m: 0.1e-3,
     speed_m_per_s: 0.5e-3,
 };
-
-/// Half-width of the fine grid of small moves from rest, m: it covers the
-/// main grid's half cell (the 5 mm grid's nearest plan to an error of
-/// 1-2.5 mm is the empty one), so that the end game has plans too.
-pub const FINE_RANGE_M: f64 = 3.0e-3;
-/// Spacing of the fine grid, m.
-pub const FINE_STEP_M: f64 = 0.5e-3;
 
 /// Input weight of the feasibility problem, per (T/m)^2: a regularizer only
 /// (at u_max it costs 1.6e-6 per sample against 1 at the band's edge).

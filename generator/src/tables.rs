@@ -9,10 +9,11 @@
 //! index over moving states points into the tails.
 
 use crate::config::Config;
+use crate::index::{build_index, occupied_cells, IndexGrid};
 use crate::legs::{build_leg_table, LegTable};
 use crate::mintime::{
-    arrival_sample, finish_at_rest, grid_min_time_plans, Band, FINE_PLAN_BAND, FINE_RANGE_M,
-    FINE_STEP_M, PLAN_BAND, SETTLE_BAND,
+    arrival_sample, finish_at_rest, grid_min_time_plans, Band, FINE_PLAN_BAND, PLAN_BAND,
+    SETTLE_BAND,
 };
 use crate::model::Model;
 use crate::ocp::{Ocp, Plan};
@@ -22,8 +23,9 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 /// Bumped whenever the table layout or its meaning changes (2: SHA-256
-/// trailer over the payload; 3: minimum-time plans and chained legs).
-pub const TABLE_FORMAT_VERSION: u32 = 3;
+/// trailer over the payload; 3: minimum-time plans and chained legs; 4: a
+/// sparse warm-start index).
+pub const TABLE_FORMAT_VERSION: u32 = 4;
 /// First bytes of every table file.
 pub const TABLE_MAGIC: [u8; 8] = *b"CAPSMPC\0";
 /// Length of the SHA-256 trailer that ends every table file, bytes.
@@ -35,9 +37,6 @@ pub const INDEX_SPEED_STEP_M_PER_S: f64 = 0.1;
 /// The index covers positions to this multiple of the plan grid's range
 /// (plans overshoot their start box on the way).
 pub const INDEX_POSITION_MARGIN: f64 = 1.25;
-/// Candidates (nearest by scaled distance) whose tails are rolled out when
-/// choosing a cell's warm start.
-const INDEX_CANDIDATES: usize = 8;
 
 /// Grid geometry shared by the plan grid and the index.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -126,7 +125,10 @@ pub struct Tables {
     pub plans: Vec<PlanEntry>,
     pub index_position_axis: Axis,
     pub index_speed_axis: Axis,
-    /// Per cell (row-major over [e1, v1, e2, v2, ...]): (plan, step offset).
+    /// Kept cells of the warm-start index, ascending row-major numbers over
+    /// [e1, v1, e2, v2, ...] (see [`crate::index`]).
+    pub index_cells: Vec<u64>,
+    /// Per kept cell: (plan, step offset).
     pub index: Vec<(u16, u16)>,
     pub switching: SwitchingConstants,
     /// First legs of chained plans over the workspace's displacements.
@@ -138,7 +140,7 @@ pub struct Tables {
 }
 
 /// Minimum-time plans from rest over a fine grid of small relative
-/// positions (`FINE_RANGE_M`, `FINE_STEP_M`), for both schedules: the main
+/// positions (`grid.fine_range_m`, `grid.fine_step_m`), for both schedules: the main
 /// grid's nearest plan to a rest state 1-2.5 mm off is the empty one, and
 /// the local refinement cannot separate capsules at rest.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -159,6 +161,7 @@ pub struct CoastedTables {
     /// The coast after every sample, s (tracking time + extra delay).
     pub coast_s: f64,
     pub plans: Vec<PlanEntry>,
+    /// Per kept cell of `Tables::index_cells`: (plan, step offset).
     pub index: Vec<(u16, u16)>,
 }
 
@@ -183,6 +186,22 @@ pub enum TableError {
 pub fn config_hash(config: &Config) -> [u8; 32] {
     let json = serde_json::to_vec(config).expect("config serializes");
     Sha256::digest(&json).into()
+}
+
+/// SHA-256 of the parts of the config that shape the emitted solver: the
+/// config with the simulation-only sections (`disturbance`, `measurement`)
+/// at their defaults and the Pulseq writer's scanner limits cleared. Two
+/// configs with the same solver hash run on the same compiled controller.
+pub fn solver_hash(config: &Config) -> [u8; 32] {
+    let mut solver = config.clone();
+    solver.disturbance = Default::default();
+    solver.measurement = Default::default();
+    let s = &mut solver.scanner;
+    s.slew_rate_t_per_m_per_s = None;
+    s.gradient_raster_s = None;
+    s.tracking_rf_duration_s = None;
+    s.tracking_adc_duration_s = None;
+    config_hash(&solver)
 }
 
 pub fn hex(bytes: &[u8]) -> String {
@@ -343,7 +362,7 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
     };
     let coasted_plans = schedule_plans(&coasted_ocp, &axis, &PLAN_BAND, &e0_of, grid, progress);
     // The end game: small moves from rest on a fine grid around the target.
-    let fine_axis = Axis::symmetric(FINE_RANGE_M, FINE_STEP_M);
+    let fine_axis = Axis::symmetric(grid.fine_range_m(), grid.fine_step_m());
     let fine_dims = vec![fine_axis.count; m];
     let fine_e0_of = |flat: usize| -> Vec<f64> {
         unflatten(flat, &fine_dims)
@@ -380,18 +399,18 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
         grid.position_step_m,
     );
     let index_speed_axis = Axis::symmetric(INDEX_SPEED_RANGE_M_PER_S, INDEX_SPEED_STEP_M_PER_S);
-    let index = build_index(
-        &ocp,
-        &plans,
-        &index_position_axis,
-        &index_speed_axis,
-        progress,
-    );
+    let index_grid = IndexGrid {
+        position: &index_position_axis,
+        speed: &index_speed_axis,
+        capsules: m,
+    };
+    let index_cells = occupied_cells(index_grid, &[&plans, &coasted_plans], steps);
+    let index = build_index(&ocp, &plans, index_grid, &index_cells, progress);
     let coasted_index = build_index(
         &coasted_ocp,
         &coasted_plans,
-        &index_position_axis,
-        &index_speed_axis,
+        index_grid,
+        &index_cells,
         progress,
     );
     Tables {
@@ -406,6 +425,7 @@ pub fn build_tables(config: &Config, progress: &dyn Progress) -> Tables {
         plans,
         index_position_axis,
         index_speed_axis,
+        index_cells,
         index,
         switching: switching_constants(config, &model),
         legs,
@@ -474,87 +494,6 @@ fn schedule_plans(
                 arrival_samples: samples,
                 min_time_s,
             }
-        })
-        .collect()
-}
-
-/// For every index cell, the stored plan sample whose tail, rolled out from
-/// the cell centre, has the lowest cost among the nearest candidates.
-fn build_index(
-    ocp: &Ocp,
-    plans: &[PlanEntry],
-    pos: &Axis,
-    spd: &Axis,
-    progress: &dyn Progress,
-) -> Vec<(u16, u16)> {
-    let m = ocp.model.capsule_count();
-    let steps = ocp.steps;
-    let dims: Vec<usize> = (0..2 * m)
-        .map(|j| if j % 2 == 0 { pos.count } else { spd.count })
-        .collect();
-    let cells: usize = dims.iter().product();
-    // Only reached plans are warm-start material.
-    let samples: Vec<(u16, u16, &[f64])> = plans
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| p.reached)
-        .flat_map(|(pi, p)| {
-            p.plan.states[..steps]
-                .iter()
-                .enumerate()
-                .map(move |(k, s)| (pi as u16, k as u16, s.as_slice()))
-        })
-        .collect();
-    let scale: Vec<f64> = (0..2 * m)
-        .map(|j| if j % 2 == 0 { pos.step } else { spd.step })
-        .collect();
-    progress.start("warm-start index", cells);
-    (0..cells)
-        .into_par_iter()
-        .map(|flat| {
-            let idx = unflatten(flat, &dims);
-            let centre: Vec<f64> = idx
-                .iter()
-                .enumerate()
-                .map(|(j, &i)| {
-                    if j % 2 == 0 {
-                        pos.value(i)
-                    } else {
-                        spd.value(i)
-                    }
-                })
-                .collect();
-            let mut near: Vec<(f64, usize)> = samples
-                .iter()
-                .enumerate()
-                .map(|(si, (_, _, s))| {
-                    let d: f64 = (0..2 * m)
-                        .map(|j| ((s[j] - centre[j]) / scale[j]).powi(2))
-                        .sum();
-                    (d, si)
-                })
-                .collect();
-            let keep = INDEX_CANDIDATES.min(near.len());
-            if keep == 0 {
-                progress.tick();
-                return (u16::MAX, 0);
-            }
-            near.select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            near.truncate(keep);
-            near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            let best = near
-                .iter()
-                .map(|&(_, si)| {
-                    let (pi, k, _) = samples[si];
-                    let plan = &plans[pi as usize].plan;
-                    let mut tail = vec![0.0; steps];
-                    tail[..steps - k as usize].copy_from_slice(&plan.u[k as usize..]);
-                    (ocp.rollout(&centre, &tail).1, pi, k)
-                })
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-                .expect("non-empty");
-            progress.tick();
-            (best.1, best.2)
         })
         .collect()
 }
@@ -637,6 +576,7 @@ mod tests {
             }],
             index_position_axis: Axis::symmetric(0.01, 0.01),
             index_speed_axis: Axis::symmetric(0.1, 0.1),
+            index_cells: vec![0, 4, 8],
             index: vec![(0, 0), (0, 1), (u16::MAX, 0)],
             switching: SwitchingConstants {
                 l_f: 1.0,

@@ -13,7 +13,7 @@
 //! operation count is bounded by `EXPLICIT_CERTIFIED_OPS`.
 
 use super::explicit_tables::*;
-use super::solver::{axis_nearest, clamp_u, BoxQp, FINE_REST_SPEED_M_PER_S};
+use super::solver::{axis_nearest, clamp_u, index_lower_bound, BoxQp, FINE_REST_SPEED_M_PER_S};
 use super::spec::*;
 use super::tables::*;
 
@@ -35,7 +35,8 @@ pub struct ExplicitOutcome {
 /// the fine plan's (the index's nearest sample there is a finished plan,
 /// which cannot separate capsules at rest); otherwise the nearest (in
 /// index cells) of the samples named by the cell of `e`, its 2 NX
-/// neighbours along the axes, and the successor of `last` (the previous
+/// neighbours along the axes (those the sparse index keeps; a cell is
+/// found by bisection over `INDEX_CELLS`), and the successor of `last` (the previous
 /// step's sample; `usize::MAX`: none). Why not the cell's own sample
 /// alone: it was chosen by its cost from the cell's centre, and a cell is
 /// 0.1 m/s wide in speed; linearized around it, the deviation reached
@@ -50,30 +51,38 @@ pub fn explicit_slot(e: &[f64; NX], coasted: bool, last: usize) -> Option<usize>
         &EXPLICIT_INDEX_SLOT
     };
     let mut idx = [0usize; NX];
-    let mut flat = 0usize;
+    let mut flat = 0u64;
     let mut j = 0;
     while j < NX {
         let axis = axis_of(j);
         idx[j] = axis_nearest(&axis, e[j])?;
-        flat = flat * axis.count + idx[j];
+        flat = flat * axis.count as u64 + idx[j] as u64;
         j += 1;
     }
     let mut best = usize::MAX;
     let mut best_distance = f64::INFINITY;
-    consider(e, slot_at(slots, flat), &mut best, &mut best_distance);
+    // The sparse index keeps only cells near stored plans: the cell and its
+    // neighbours are found among `INDEX_CELLS` by bisection (cells not kept
+    // are skipped). The cell's lower bound splits the kept cells: lower
+    // neighbours lie before it, higher ones from it on.
+    let cells = INDEX_CELLS.len();
+    let split = index_lower_bound(flat, 0, cells);
+    consider(e, slot_of_cell(slots, flat, split, cells), &mut best, &mut best_distance);
     // Neighbours: stride of axis j = product of the later axes' counts.
-    let mut stride = 1usize;
+    let mut stride = 1u64;
     let mut j = NX;
     while j > 0 {
         j -= 1;
         let count = axis_of(j).count;
         if idx[j] > 0 {
-            consider(e, slot_at(slots, flat - stride), &mut best, &mut best_distance);
+            let slot = slot_of_cell(slots, flat - stride, 0, split);
+            consider(e, slot, &mut best, &mut best_distance);
         }
         if idx[j] + 1 < count {
-            consider(e, slot_at(slots, flat + stride), &mut best, &mut best_distance);
+            let slot = slot_of_cell(slots, flat + stride, split, cells);
+            consider(e, slot, &mut best, &mut best_distance);
         }
-        stride *= count;
+        stride *= count as u64;
     }
     if last < EXPLICIT_COUNT {
         consider(e, EXPLICIT[last].next as usize, &mut best, &mut best_distance);
@@ -93,8 +102,15 @@ fn axis_of(j: usize) -> Axis {
     }
 }
 
-fn slot_at(slots: &[u16], flat: usize) -> usize {
-    match slots.get(flat) {
+/// The explicit slot of the cell numbered `flat` (row-major on the dense
+/// grid) if it is kept, looked for among `INDEX_CELLS[lo..hi]`;
+/// `usize::MAX` otherwise.
+fn slot_of_cell(slots: &[u16], flat: u64, lo: usize, hi: usize) -> usize {
+    let kept = index_lower_bound(flat, lo, hi);
+    if kept >= hi || kept >= INDEX_CELLS.len() || INDEX_CELLS[kept] != flat {
+        return usize::MAX;
+    }
+    match slots.get(kept) {
         Some(&s) if s != NO_SLOT => s as usize,
         _ => usize::MAX,
     }

@@ -776,9 +776,14 @@ pub fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
     Some(libm::round(f) as usize)
 }
 
-/// The warm-start index cell of relative state `e`; None outside the index.
-pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
-    let mut flat = 0usize;
+/// Bisection probes that find any cell among `INDEX_CELLS` (2^64 > any count).
+const INDEX_PROBES: usize = 64;
+
+/// The row-major number of `e`'s cell on the (dense) warm-start index grid
+/// (position, speed axes alternating, the last axis fastest); None outside
+/// the grid.
+pub fn index_flat(e: &[f64; NX]) -> Option<u64> {
+    let mut flat = 0u64;
     let mut j = 0;
     while j < NX {
         let axis = if j % 2 == 0 {
@@ -786,10 +791,46 @@ pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
         } else {
             &INDEX_SPEED_AXIS
         };
-        flat = flat * axis.count + axis_nearest(axis, e[j])?;
+        flat = flat * axis.count as u64 + axis_nearest(axis, e[j])? as u64;
         j += 1;
     }
     Some(flat)
+}
+
+/// The first position in `INDEX_CELLS[lo..hi]` whose cell number is not
+/// below `flat` (`hi` if none), by bisection: `INDEX_PROBES` probes at most.
+pub fn index_lower_bound(flat: u64, lo: usize, hi: usize) -> usize {
+    let (mut lo, mut hi) = (lo, if hi < INDEX_CELLS.len() { hi } else { INDEX_CELLS.len() });
+    let mut probes = 0;
+    while lo < hi && probes < INDEX_PROBES {
+        let mid = lo + (hi - lo) / 2;
+        if INDEX_CELLS[mid] < flat {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+        probes += 1;
+    }
+    lo
+}
+
+/// The slot among the kept cells of the sparse warm-start index
+/// (`INDEX_CELLS`) of the cell numbered `flat` (see `index_flat`); None
+/// when no stored plan passes near that cell (it is not kept).
+pub fn kept_slot(flat: u64) -> Option<usize> {
+    let lo = index_lower_bound(flat, 0, INDEX_CELLS.len());
+    if lo < INDEX_CELLS.len() && INDEX_CELLS[lo] == flat {
+        Some(lo)
+    } else {
+        None
+    }
+}
+
+/// The slot of `e`'s cell among the kept cells of the sparse warm-start
+/// index (`INDEX_CELLS`); None outside the index grid or in a cell no
+/// stored plan passes near.
+pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
+    kept_slot(index_flat(e)?)
 }
 
 /// Most QP iterations measured offline in the index cell of `e` (0: not

@@ -28,6 +28,14 @@ pub type DefaultController = Controller<
     { generated::controller::spec::K },
 >;
 
+/// The controller of the shipped three-capsule preset
+/// (`configs/three-capsules.toml`).
+pub type ThreeCapsuleController = Controller<
+    generated::three_capsules::solver::Solver,
+    { generated::three_capsules::spec::NX },
+    { generated::three_capsules::spec::K },
+>;
+
 /// The paper's NMPC taken literally, for comparison.
 pub type PaperController = Controller<
     generated::paper_preset::solver::Solver,

@@ -7,7 +7,9 @@ use crate::plant::{Phase, Plant};
 use crate::report::{MeasurementRecord, RunReport, TierCycles};
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
+use capsule_mpc_generator::generate::ControllerModule;
 use capsule_mpc_generator::model::Model;
+use capsule_mpc_generator::tables::{hex, solver_hash};
 use capsule_mpc_runtime::controller::{Refine, SwitchingRule};
 use capsule_mpc_runtime::generated::{PlanSolver, Tier};
 use capsule_mpc_runtime::{Controller, RuntimeError, RuntimeStatus};
@@ -141,16 +143,71 @@ impl RunOptions {
     }
 }
 
+/// The product controllers compiled into this binary: module name, capsule
+/// count and the solver hash of the config each was generated for.
+pub fn compiled_controllers() -> [(ControllerModule, usize, &'static str); 2] {
+    use capsule_mpc_runtime::generated::{controller, three_capsules};
+    [
+        (
+            ControllerModule::Controller,
+            controller::spec::M,
+            controller::spec::SOLVER_SHA256,
+        ),
+        (
+            ControllerModule::ThreeCapsules,
+            three_capsules::spec::M,
+            three_capsules::spec::SOLVER_SHA256,
+        ),
+    ]
+}
+
+/// The compiled controller module generated for `config` (by solver hash:
+/// the simulation-only sections may differ), or an error that says how to
+/// generate one.
+pub fn compiled_controller_for(config: &Config) -> Result<ControllerModule> {
+    let wanted = hex(&solver_hash(config));
+    let compiled = compiled_controllers();
+    if let Some((module, _, _)) = compiled.iter().find(|(_, _, h)| *h == wanted) {
+        return Ok(*module);
+    }
+    let list: Vec<String> = compiled
+        .iter()
+        .map(|(module, m, h)| format!("`{}` ({m} capsules, {}…)", module.module_name(), &h[..12]))
+        .collect();
+    let module = match config.capsule_count() {
+        3 => ControllerModule::ThreeCapsules,
+        _ => ControllerModule::Controller,
+    };
+    bail!(
+        "no compiled controller for this config ({} capsules, solver hash {}…); this binary has {}. \
+         Generate one with `capsule-mpc generate --config FILE --module {}` and rebuild \
+         (`cargo build --release`)",
+        config.capsule_count(),
+        &wanted[..12],
+        list.join(" and "),
+        module.cli_name()
+    )
+}
+
 /// Runs the closed loop and returns the full report.
 pub fn run(config: &Config, opts: &RunOptions) -> Result<RunReport> {
-    use capsule_mpc_runtime::generated::{controller, paper_preset};
-    match opts.preset {
-        Preset::Default => {
+    use capsule_mpc_runtime::generated::{controller, paper_preset, three_capsules};
+    let module = compiled_controller_for(config)?;
+    match (opts.preset, module) {
+        (Preset::Default, ControllerModule::Controller) => {
             run_with::<controller::solver::Solver, { controller::spec::NX }, { controller::spec::K }>(
                 config, opts,
             )
         }
-        Preset::Paper => run_with::<
+        (Preset::Default, ControllerModule::ThreeCapsules) => run_with::<
+            three_capsules::solver::Solver,
+            { three_capsules::spec::NX },
+            { three_capsules::spec::K },
+        >(config, opts),
+        (Preset::Paper, ControllerModule::ThreeCapsules) => {
+            bail!("the paper preset is compiled for the default two-capsule config only")
+        }
+        (Preset::Paper, ControllerModule::Controller) => run_with::<
             paper_preset::solver::Solver,
             { paper_preset::spec::NX },
             { paper_preset::spec::K },
@@ -220,8 +277,8 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     let positions: Vec<f64> = x0.iter().step_by(2).copied().collect();
     let mut ctl = Controller::<S, NX, K>::new(settings, &positions).map_err(|e| match e {
         RuntimeError::BadSetting("refine") => anyhow::anyhow!(
-            "refine = none needs the explicit tier's data, and the {:?} preset has no tables: use refine once or per-sample",
-            opts.preset
+            "refine = none needs the explicit tier's data, which only the default two-capsule controller has \
+             (not the paper preset, which has no tables, nor the three-capsule module): use refine once or per-sample"
         ),
         e => anyhow::anyhow!("controller settings: {e:?}"),
     })?;

@@ -43,8 +43,10 @@ pub fn schedules() -> [(usize, f64); 3] {
     })
 }
 
-/// Centre of index cell `flat` (row-major over e1, v1, e2, v2, ...).
-pub fn cell_centre(mut flat: usize) -> [f64; spec::NX] {
+/// Centre of the kept index cell in `slot` (its row-major number over e1,
+/// v1, e2, v2, ... is `tables::INDEX_CELLS[slot]`).
+pub fn cell_centre(slot: usize) -> [f64; spec::NX] {
+    let mut flat = tables::INDEX_CELLS[slot] as usize;
     let mut e = [0.0; spec::NX];
     for j in (0..spec::NX).rev() {
         let axis = if j % 2 == 0 {
@@ -94,34 +96,32 @@ pub fn measure() -> Vec<u8> {
     dilate(&map)
 }
 
-/// Each cell's count becomes the largest over the cell and its neighbours
-/// (+-1 along every axis): states inside a cell lie between its centre and
-/// its neighbours' centres, and the count varies from centre to centre.
+/// Each cell's count becomes the largest over the cell and its kept
+/// neighbours (+-1 along every axis): states inside a cell lie between its
+/// centre and its neighbours' centres, and the count varies from centre to
+/// centre.
 fn dilate(map: &[u8]) -> Vec<u8> {
-    let dims: Vec<usize> = (0..spec::NX)
-        .map(|j| {
-            if j % 2 == 0 {
-                tables::INDEX_POSITION_AXIS.count
-            } else {
-                tables::INDEX_SPEED_AXIS.count
+    let step = [
+        tables::INDEX_POSITION_AXIS.step,
+        tables::INDEX_SPEED_AXIS.step,
+    ];
+    (0..map.len())
+        .map(|slot| {
+            let centre = cell_centre(slot);
+            let mut most = map[slot];
+            // Every offset in {-1, 0, 1}^NX, as a base-3 counter.
+            for k in 0..3usize.pow(spec::NX as u32) {
+                let mut e = centre;
+                let mut rest = k;
+                for (j, x) in e.iter_mut().enumerate() {
+                    *x += (rest % 3) as f64 * step[j % 2] - step[j % 2];
+                    rest /= 3;
+                }
+                if let Some(n) = solver::index_cell(&e) {
+                    most = most.max(map[n]);
+                }
             }
+            most
         })
-        .collect();
-    let mut out = map.to_vec();
-    // Separable: a max over +-1 along each axis in turn covers the 3^NX block.
-    let mut stride = 1;
-    for &n in dims.iter().rev() {
-        let src = out.clone();
-        for (c, v) in out.iter_mut().enumerate() {
-            let i = (c / stride) % n;
-            if i > 0 {
-                *v = (*v).max(src[c - stride]);
-            }
-            if i + 1 < n {
-                *v = (*v).max(src[c + stride]);
-            }
-        }
-        stride *= n;
-    }
-    out
+        .collect()
 }

@@ -125,6 +125,8 @@ pub fn reach_map(
     opts: &ReachOptions,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<ReachPoint>> {
+    // Without a compiled controller every target would be "refused": say so once.
+    crate::closed_loop::compiled_controller_for(config)?;
     let model = Model::from_config(config);
     let m = model.capsule_count();
     let start = if opts.start_m.is_empty() {

@@ -3,10 +3,12 @@
 
 use crate::cli::{load_config, GenerateArgs};
 use anyhow::{bail, Context, Result};
+use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::emit::qp_max_iterations;
 use capsule_mpc_generator::explicit::explicit_step_ops;
 use capsule_mpc_generator::generate::{
-    differences, emit_all, generate, write_atomically, GeneratedFiles,
+    differences, emit_module_files, generate_module, write_atomically, ControllerModule,
+    GeneratedFiles,
 };
 use capsule_mpc_generator::tables::{Progress, Tables};
 use capsule_mpc_sim::qp_map;
@@ -46,18 +48,23 @@ impl Bar {
 }
 
 pub fn run(args: &GenerateArgs) -> Result<()> {
-    let config = load_config(args.config.as_deref())?;
+    let module = ControllerModule::from(args.module);
+    let config = match &args.config {
+        Some(_) => load_config(args.config.as_deref())?,
+        None => module.default_config(),
+    };
+    check_module_fits(module, &config)?;
     let started = Instant::now();
     let bar = Bar(Mutex::new(None));
     let mut files = if args.reuse_tables && !args.check {
-        let path = args.out.join("tables.bin");
+        let path = args.out.join(module.tables_path());
         let tables = Tables::read(&path, &config).context("--reuse-tables")?;
-        emit_all(&config, tables)?
+        emit_module_files(module, &config, tables)?
     } else {
-        generate(&config, &bar)?
+        generate_module(module, &config, &bar)?
     };
     bar.finish();
-    if !qp_map::fill_if_compiled(&mut files)? {
+    if module == ControllerModule::Controller && !qp_map::fill_if_compiled(&mut files)? {
         eprintln!(
             "note: the emitted solver differs from the one compiled into this binary, so its \
              QP iteration map was left unmeasured; rebuild (`cargo build --release`) and run \
@@ -69,7 +76,7 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
     let table_bytes = files
         .files
         .iter()
-        .find(|(p, _)| p.ends_with("tables.bin"))
+        .find(|(p, _)| p.ends_with(module.tables_path()))
         .map_or(0, |(_, b)| b.len());
     if args.check {
         let diff = differences(&args.out, &files);
@@ -89,11 +96,13 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
     }
     write_atomically(&args.out, &files)?;
     println!(
-        "generated {} in {elapsed:.1} s: {} plans ({} reach their target), {} index cells, tables.bin {} bytes",
+        "generated {} (module {}) in {elapsed:.1} s: {} plans ({} reach their target), {} index cells, {} {} bytes",
         args.out.display(),
+        module.module_name(),
         t.plans.len(),
         t.reached_count(),
         t.index.len(),
+        module.tables_path(),
         table_bytes
     );
     print_explicit_tier(&config, &files);
@@ -103,7 +112,11 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
 /// The explicit tier's data and its certified worst case (emitted as
 /// `EXPLICIT_CERTIFIED_OPS`): operations of one step from the loop bounds
 /// with the QP at its iteration cap.
-fn print_explicit_tier(config: &capsule_mpc_generator::config::Config, files: &GeneratedFiles) {
+fn print_explicit_tier(config: &Config, files: &GeneratedFiles) {
+    if files.explicit.samples.is_empty() {
+        println!("explicit tier: none in this module (refine = none is refused for it)");
+        return;
+    }
     let c = &config.controller;
     let nx = 2 * config.capsule_count();
     let cap = qp_max_iterations(c.horizon_steps);
@@ -114,4 +127,17 @@ fn print_explicit_tier(config: &capsule_mpc_generator::config::Config, files: &G
         explicit_step_ops(c.horizon_steps, nx, c.plan_steps, cap),
         cap
     );
+}
+
+/// The `three-capsules` module is named for its capsule count (the
+/// `controller` module takes any count: users regenerate it for theirs).
+fn check_module_fits(module: ControllerModule, config: &Config) -> Result<()> {
+    let m = config.capsule_count();
+    if module == ControllerModule::ThreeCapsules && m != 3 {
+        bail!(
+            "--config has {m} capsules; the `three-capsules` module is built for 3 \
+             (regenerate the `controller` module for other counts)"
+        );
+    }
+    Ok(())
 }

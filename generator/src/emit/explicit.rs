@@ -7,25 +7,19 @@ use proc_macro2::{Literal, TokenStream};
 use quote::quote;
 
 /// The `explicit_tables` module. `explicit` is None for a controller
-/// without tables (the paper preset): no samples, every slot empty.
-/// `cells` and `fine_count` size the slot arrays like the index and the
-/// fine grid they parallel.
+/// without an explicit tier (the paper preset, which has no tables, and
+/// `three_capsules`): no samples and empty slot arrays (the template reads
+/// them with `get`, so a missing slot is no sample), so
+/// `HAS_EXPLICIT_TIER` is false. Otherwise the slot arrays parallel the
+/// kept cells of the sparse index (`INDEX_CELLS`) and the fine grid.
 pub fn emit_explicit_tables(
     explicit: Option<&ExplicitTables>,
     n: usize,
     nx: usize,
     k: usize,
     qp_max_iterations: usize,
-    cells: usize,
-    fine_count: usize,
 ) -> Result<TokenStream, EmitError> {
-    let empty = ExplicitTables {
-        samples: Vec::new(),
-        index_slot: vec![NO_SLOT; cells],
-        coasted_index_slot: vec![NO_SLOT; cells],
-        fine_slot: vec![NO_SLOT; fine_count],
-        coasted_fine_slot: vec![NO_SLOT; fine_count],
-    };
+    let empty = ExplicitTables::default();
     let t = explicit.unwrap_or(&empty);
     let samples = t
         .samples
@@ -125,8 +119,9 @@ pub fn emit_explicit_tables(
             /// Slot value of a cell without a sample.
             pub const NO_SLOT: u16 = #NO_SLOT;
             pub static EXPLICIT: [ExplicitSample; EXPLICIT_COUNT] = [#(#samples),*];
-            /// Per warm-start index cell: the slot of its sample (back to
-            /// back, and constant sampling's).
+            /// Per kept cell of the sparse warm-start index (parallel to
+            /// `tables::INDEX_CELLS`; empty without an explicit tier): the
+            /// slot of its sample (back to back, and constant sampling's).
             pub static EXPLICIT_INDEX_SLOT: [u16; #cells] = [#(#index_slot),*];
             pub static COASTED_EXPLICIT_INDEX_SLOT: [u16; #cells] = [#(#coasted_index_slot),*];
             /// Per fine grid point: the slot of its plan's first sample.

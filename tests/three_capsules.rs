@@ -1,0 +1,268 @@
+//! Issue 16: the shipped three-capsule preset (`configs/three-capsules.toml`)
+//! is compiled next to the default, picked by its config, and steers three
+//! capsules to every target of its +-3 cm workspace.
+
+use capsule_mpc_generator::config::{Config, DisturbanceKind};
+use capsule_mpc_generator::generate::ControllerModule;
+use capsule_mpc_generator::model::Model;
+use capsule_mpc_runtime::generated::{controller, three_capsules};
+use capsule_mpc_sim::closed_loop::{compiled_controller_for, run, RunOptions, Sampling};
+use capsule_mpc_sim::plant::DisturbanceLevel;
+use capsule_mpc_sim::reach::{reach_map, ReachOptions, ReachPoint, ReachSummary};
+
+fn cm(v: &[f64]) -> Vec<f64> {
+    v.iter().map(|x| x * 100.0).collect()
+}
+
+/// Run length, s: long enough for the slowest chained moves (minimum-time
+/// bounds up to 3.7 s) and the end game's re-plans.
+const RUN_S: f64 = 8.0;
+
+fn three() -> Config {
+    Config::embedded_three_capsules()
+}
+
+fn ideal_reach(step_m: f64) -> (Vec<ReachPoint>, ReachSummary) {
+    let opts = ReachOptions {
+        range_m: 0.03,
+        step_m,
+        sampling: Sampling::Ideal,
+        disturbance: DisturbanceLevel::None,
+        disturbance_kind: DisturbanceKind::Random,
+        seed: 1,
+        start_m: Vec::new(),
+        duration_s: Some(RUN_S),
+    };
+    let points = reach_map(&three(), &opts, &|| {}).unwrap();
+    let summary = ReachSummary::of(&points);
+    (points, summary)
+}
+
+/// Targets whose run was refused or did not settle, or settled later than
+/// `limit_s` (in the band, held 1 s).
+fn late(points: &[ReachPoint], limit_s: f64) -> Vec<String> {
+    points
+        .iter()
+        .filter(|p| p.refused.is_some() || p.settle_time_s.is_none_or(|t| t > limit_s))
+        .map(|p| {
+            format!(
+                "{:?} cm: {:?} {:?}",
+                cm(&p.target_m),
+                p.settle_time_s,
+                p.refused
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn each_config_runs_on_its_own_compiled_controller() {
+    assert_eq!(
+        compiled_controller_for(&three()).unwrap(),
+        ControllerModule::ThreeCapsules
+    );
+    assert_eq!(
+        compiled_controller_for(&Config::embedded_default()).unwrap(),
+        ControllerModule::Controller
+    );
+    assert_eq!(three_capsules::spec::M, 3);
+    assert_eq!(controller::spec::M, 2);
+    // The simulation-only sections do not select a controller.
+    let mut noisy = three();
+    noisy.measurement.position_noise_m = 1e-3;
+    noisy.disturbance.seed = 99;
+    assert_eq!(
+        compiled_controller_for(&noisy).unwrap(),
+        ControllerModule::ThreeCapsules
+    );
+}
+
+/// A config nothing was compiled for is refused before the run, with the
+/// command that generates its controller.
+#[test]
+fn a_config_with_no_compiled_controller_says_how_to_generate_one() {
+    let mut other = three();
+    other.capsule[1].sphere_radius_m = 0.0025;
+    let target = vec![0.01, 0.0, 0.0, 0.0, -0.01, 0.0];
+    let err = run(&other, &RunOptions::new(&other, target, Sampling::Ideal))
+        .unwrap_err()
+        .to_string();
+    for needle in [
+        "no compiled controller",
+        "3 capsules",
+        "capsule-mpc generate --config FILE --module three-capsules",
+        "cargo build --release",
+        "`three_capsules` (3 capsules",
+    ] {
+        assert!(err.contains(needle), "`{needle}` missing from: {err}");
+    }
+    let mut two = Config::embedded_default();
+    two.controller.sample_time_s = 0.025;
+    let err = run(
+        &two,
+        &RunOptions::new(&two, vec![0.01, 0.0, 0.0, 0.0], Sampling::Ideal),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("--module controller"), "{err}");
+}
+
+/// Every target of the 1 cm grid over the workspace (342 targets, the plan
+/// grid's own points) from rest at the origin, ideal sampling: accepted and
+/// settled (in the band, held 1 s). Issue 16 asks for 1.5 s; the minimum-time
+/// bound itself exceeds 1.5 s for 144 of these targets (three capsules
+/// separate only through their drag differences), and the end game loses
+/// time to relative drift (README, "Three capsules"). Measured: median
+/// 1.71 s, worst 5.69 s; asserted: median <= 2 s, every target within the
+/// 8 s run.
+#[test]
+fn every_target_of_the_1_cm_grid_settles() {
+    let (points, s) = ideal_reach(0.01);
+    assert_eq!(s.targets, 342);
+    println!(
+        "M = 3, 1 cm grid: settle median {:?} s, worst {:?} s; settle / bound median {:?}, worst {:?} at {:?}",
+        s.median_settle_time_s,
+        s.worst_settle_time_s,
+        s.median_settle_over_bound,
+        s.worst_settle_over_bound,
+        s.worst_ratio_target_m.as_deref().map(cm)
+    );
+    let bad = late(&points, RUN_S);
+    assert!(bad.is_empty(), "{} targets: {bad:?}", bad.len());
+    assert!(s.median_settle_time_s.unwrap() <= 2.0);
+}
+
+/// Off the plan grid: a 1.5 cm grid (124 targets, most between plan grid
+/// points, reached through chained legs and the fine end game): every one
+/// accepted; measured: 123 settle within the 8 s run (median 2.15 s, worst
+/// 6.30 s), (-1.5, 3, -3) cm does not. Asserted: at most one unsettled,
+/// median <= 2.5 s.
+#[test]
+fn off_grid_targets_settle() {
+    let (points, s) = ideal_reach(0.015);
+    assert_eq!(s.targets, 124);
+    println!(
+        "M = 3, 1.5 cm grid: settle median {:?} s, worst {:?} s",
+        s.median_settle_time_s, s.worst_settle_time_s
+    );
+    assert!(points.iter().all(|p| p.refused.is_none()));
+    let bad = late(&points, RUN_S);
+    assert!(bad.len() <= 1, "{} targets: {bad:?}", bad.len());
+    assert!(s.median_settle_time_s.unwrap() <= 2.5);
+}
+
+/// Constant and variable sampling with 0.2 mm noise and the paper's
+/// disturbance, seeds 1-4, over targets spread through the workspace
+/// (corners, faces, the issue's (1, 1, 1) cm, mixed directions). Issue 16
+/// asks for every run within 3 s, which is not met (README, "Three
+/// capsules"): measured, of 40 runs each, constant sampling 29 settle in the
+/// 8 s run (16 within 3 s, median 2.79 s), variable 26 (12 within 3 s,
+/// median 3.06 s); the separations (3, -3, 3), (-3, 3, 0) and (0, 2.5, -2.5)
+/// cm never settle. Asserted as a floor against regressions: at least 29
+/// and 26 runs settle, no run is refused.
+#[test]
+fn scanner_sampling_settles_with_noise_and_disturbance() {
+    let config = three();
+    let model = Model::from_config(&config);
+    let targets_cm: [[f64; 3]; 10] = [
+        [1.0, 1.0, 1.0],
+        [3.0, 3.0, 3.0],
+        [-3.0, -3.0, -3.0],
+        [3.0, -3.0, 3.0],
+        [-3.0, 3.0, 0.0],
+        [2.0, 0.0, -1.0],
+        [0.0, 2.5, -2.5],
+        [-1.5, 0.5, 2.0],
+        [0.5, -2.0, -0.5],
+        [-2.0, -1.0, 3.0],
+    ];
+    let mut summaries = Vec::new();
+    for sampling in [Sampling::Constant, Sampling::Variable] {
+        let mut settled = Vec::new();
+        let mut never = Vec::new();
+        for t in targets_cm {
+            for seed in 1..=4 {
+                let state: Vec<f64> = t.iter().flat_map(|&p| [p / 100.0, 0.0]).collect();
+                let mut opts = RunOptions::new(&config, state, sampling);
+                opts.duration_s = RUN_S;
+                opts.seed = seed;
+                opts.disturbance =
+                    DisturbanceLevel::Paper.config_of_kind(&model, seed, DisturbanceKind::Random);
+                let m = run(&config, &opts).unwrap().metrics;
+                let label = format!("{t:?} cm seed {seed}");
+                match m.settle_held_s {
+                    Some(s) => settled.push((s, label)),
+                    None => never.push(label),
+                }
+            }
+        }
+        settled.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let within_3 = settled.iter().filter(|(s, _)| *s <= 3.0).count();
+        let median = settled[settled.len() / 2].0;
+        println!(
+            "M = 3, {} sampling: {} of 40 settle, {within_3} within 3 s, median {median:.2} s, worst {:?}; never: {never:?}",
+            sampling.name(),
+            settled.len(),
+            settled.last()
+        );
+        summaries.push((sampling, settled.len()));
+    }
+    for (sampling, settled) in summaries {
+        let floor = match sampling {
+            Sampling::Constant => 29,
+            _ => 26,
+        };
+        assert!(
+            settled >= floor,
+            "{}: {settled} of 40 settled",
+            sampling.name()
+        );
+    }
+}
+
+/// The sparse index keeps a small part of the dense grid for three
+/// capsules, and the tables fit the issue's budget.
+#[test]
+fn the_sparse_index_scales_with_the_plans() {
+    let dense = |pos: usize, spd: usize, m: u32| (pos * spd).pow(m);
+    let dense3 = dense(
+        three_capsules::tables::INDEX_POSITION_AXIS.count,
+        three_capsules::tables::INDEX_SPEED_AXIS.count,
+        3,
+    );
+    let kept3 = three_capsules::tables::INDEX_CELLS.len();
+    let dense2 = dense(
+        controller::tables::INDEX_POSITION_AXIS.count,
+        controller::tables::INDEX_SPEED_AXIS.count,
+        2,
+    );
+    let kept2 = controller::tables::INDEX_CELLS.len();
+    let file_bytes = |name: &str| {
+        std::fs::metadata(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("generated")
+                .join(name),
+        )
+        .unwrap()
+        .len()
+    };
+    let (bin2, bin3) = (
+        file_bytes("tables.bin"),
+        file_bytes("three_capsules.tables.bin"),
+    );
+    println!(
+        "index cells kept: M = 2 {kept2} of {dense2}, M = 3 {kept3} of {dense3}; table files M = 2 {bin2} B, M = 3 {bin3} B; emitted data M = 2 {} B, M = 3 {} B",
+        controller::tables::TABLE_BYTES,
+        three_capsules::tables::TABLE_BYTES
+    );
+    assert!(kept3 * 2 < dense3, "{kept3} of {dense3}");
+    assert!(bin3 <= 64 << 20, "{bin3}");
+    assert!(bin2 <= 16 << 20, "{bin2}");
+    // Sorted and distinct: the runtime bisects them.
+    for cells in [
+        &three_capsules::tables::INDEX_CELLS[..],
+        &controller::tables::INDEX_CELLS[..],
+    ] {
+        assert!(cells.windows(2).all(|w| w[0] < w[1]));
+    }
+}
