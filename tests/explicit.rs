@@ -56,6 +56,113 @@ fn the_emitted_samples_are_the_generators() {
     }
 }
 
+/// The explicit look-up on the sparse index against a plain reference: the
+/// cell of `e` and its 2 NX axis neighbours on the dense grid, each looked
+/// up among the kept cells (`INDEX_CELLS`, `binary_search`), cells not kept
+/// skipped, the nearest named sample in index cells taken (first of equals
+/// in the runtime's order). States moving (off the fine grid's rest test),
+/// both schedules.
+#[test]
+fn explicit_lookup_matches_a_reference_over_the_kept_cells() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+    let axis = |j: usize| {
+        if j % 2 == 0 {
+            tables::INDEX_POSITION_AXIS
+        } else {
+            tables::INDEX_SPEED_AXIS
+        }
+    };
+    let (mut found, mut not_kept, mut neighbours_only) = (0, 0, 0);
+    for t in 0..20_000 {
+        let coasted = t % 2 == 1;
+        let slots: &[u16] = if coasted {
+            &explicit_tables::COASTED_EXPLICIT_INDEX_SLOT
+        } else {
+            &explicit_tables::EXPLICIT_INDEX_SLOT
+        };
+        // Half the states near a stored sample (where the kept cells are),
+        // half anywhere on the grid.
+        let mut e = [0.0; spec::NX];
+        if t % 4 < 2 {
+            let s = &explicit_tables::EXPLICIT[rng.gen_range(0..explicit_tables::EXPLICIT_COUNT)];
+            for j in 0..spec::NX {
+                e[j] = s.state[j] + rng.gen_range(-1.5..1.5) * axis(j).step;
+            }
+        } else {
+            for j in 0..spec::NX {
+                let a = axis(j);
+                let end = a.start + (a.count - 1) as f64 * a.step;
+                e[j] = rng.gen_range(a.start..end);
+            }
+        }
+        if e[1].abs() <= 0.01 {
+            e[1] = 0.02; // off the fine grid's rest test
+        }
+        let idx: Option<Vec<usize>> = (0..spec::NX)
+            .map(|j| solver::axis_nearest(&axis(j), e[j]))
+            .collect();
+        let got = explicit::explicit_slot(&e, coasted, usize::MAX);
+        let Some(idx) = idx else {
+            assert_eq!(got, None, "outside the grid at {e:?}");
+            continue;
+        };
+        let dims: Vec<u64> = (0..spec::NX).map(|j| axis(j).count as u64).collect();
+        let flat_of = |idx: &[usize]| {
+            idx.iter()
+                .zip(&dims)
+                .fold(0u64, |f, (&i, &n)| f * n + i as u64)
+        };
+        let mut cells = vec![idx.clone()];
+        for j in (0..spec::NX).rev() {
+            if idx[j] > 0 {
+                let mut c = idx.clone();
+                c[j] -= 1;
+                cells.push(c);
+            }
+            if idx[j] + 1 < axis(j).count {
+                let mut c = idx.clone();
+                c[j] += 1;
+                cells.push(c);
+            }
+        }
+        let (mut best, mut best_d) = (None, f64::INFINITY);
+        for (i, c) in cells.iter().enumerate() {
+            let Ok(kept) = tables::INDEX_CELLS.binary_search(&flat_of(c)) else {
+                if i == 0 {
+                    not_kept += 1;
+                }
+                continue;
+            };
+            let slot = slots[kept];
+            if slot == explicit_tables::NO_SLOT {
+                continue;
+            }
+            let st = &explicit_tables::EXPLICIT[slot as usize].state;
+            let d: f64 = (0..spec::NX)
+                .map(|j| ((e[j] - st[j]) / axis(j).step).powi(2))
+                .sum();
+            if d < best_d {
+                best_d = d;
+                best = Some(slot as usize);
+            }
+        }
+        assert_eq!(got, best, "at {e:?}");
+        if got.is_some() {
+            found += 1;
+            if tables::INDEX_CELLS.binary_search(&flat_of(&idx)).is_err() {
+                neighbours_only += 1;
+            }
+        }
+    }
+    eprintln!(
+        "{found} states with a sample ({neighbours_only} from a neighbour only), {not_kept} in a cell not kept"
+    );
+    assert!(
+        found > 5_000 && not_kept > 0,
+        "{found} found, {not_kept} not kept"
+    );
+}
+
 /// Explicit plan vs clarabel on the same stored QP, at random deviations
 /// within a cell around random stored samples (both schedules).
 #[test]
@@ -255,9 +362,14 @@ fn certified_operation_bound_covers_the_bench_states() {
     );
 }
 
-/// The explicit tier alone in the closed loop, as measured (README
-/// "Explicit tier"): ideal sampling, no disturbance. A settles, later than
-/// with refinement (0.52 s); C ends within 2 mm but does not settle in 3 s.
+/// The explicit tier alone in the closed loop, as measured (README "Two
+/// tiers"): ideal sampling, no disturbance. On the sparse index (each kept
+/// cell's sample chosen among the samples of its neighbourhood) A no
+/// longer settles: it reaches the band at 0.70 s, then the end game cycles
+/// through stored samples (speeds up to 0.15 m/s, 0.75 mm off at 3 s;
+/// with the dense index it settled at 0.89 s). C ends 1.43 mm off (1.2 mm
+/// before). Asserted: the measured values with a small margin, no
+/// refinement ran, and the refinement still settles A.
 #[test]
 fn explicit_tier_alone_closed_loop_as_measured() {
     use capsule_mpc_generator::config::RefineMode;
@@ -269,11 +381,16 @@ fn explicit_tier_alone_closed_loop_as_measured() {
         run(&config, &opts).expect("closed-loop run")
     };
     let a = run_with(Scenario::A, RefineMode::None);
-    let settle = a
+    let first = a
         .metrics
-        .settle_time_s
-        .expect("A settles with the explicit tier alone");
-    assert!(settle <= 0.95, "A settled at {settle} s");
+        .first_in_band_s
+        .expect("A reaches the band with the explicit tier alone");
+    assert!(first <= 0.75, "A reached the band at {first} s");
+    assert!(
+        a.metrics.final_position_error_m < 1e-3,
+        "A ends {} m off",
+        a.metrics.final_position_error_m
+    );
     let tiers = a.tier_cycles.expect("tier counts");
     assert_eq!(tiers.refined, 0, "refine none ran the refinement");
     let c = run_with(Scenario::C, RefineMode::None);
@@ -285,7 +402,7 @@ fn explicit_tier_alone_closed_loop_as_measured() {
     let refined = run_with(Scenario::A, RefineMode::PerSample);
     let settle_refined = refined.metrics.settle_time_s.expect("A settles refined");
     assert!(
-        settle_refined < settle,
-        "refinement no longer helps A: {settle_refined} s"
+        settle_refined < 0.55,
+        "refined A settled at {settle_refined} s"
     );
 }
