@@ -129,7 +129,7 @@ fn scanner_runs(
 
 /// Issue 4: settle within 2.0 s. Measured over seeds 1-8 (both tiers,
 /// `refine = per-sample`, sparse index): A 0.72-1.16 s (mean 0.82 s), C
-/// 1.00-1.07 s except seed 4. Not met for C seed 4: it arrives at 1.15 s
+/// 1.00-1.08 s except seed 4. Not met for C seed 4: it arrives at 1.15 s
 /// (`settle_held_s`, in the band for 1 s), then the capsules drift apart at
 /// about 1 mm/s while no input is needed, leave the band at 2.55 s and
 /// settle again at 2.78 s (main without the explicit tier: 1.27 s; README,
