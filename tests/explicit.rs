@@ -66,7 +66,7 @@ fn the_emitted_samples_are_the_generators() {
 fn explicit_lookup_matches_a_reference_over_the_kept_cells() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
     let axis = |j: usize| {
-        if j % 2 == 0 {
+        if j.is_multiple_of(2) {
             tables::INDEX_POSITION_AXIS
         } else {
             tables::INDEX_SPEED_AXIS
