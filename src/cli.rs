@@ -209,6 +209,10 @@ pub struct SimulateArgs {
     /// No terminal hold near the target: the MPC re-plans to the end.
     #[arg(long)]
     pub no_hold: bool,
+    /// When the SQP refinement runs after the explicit tier (default: the
+    /// config's `controller.refine`, itself `per-sample` by default).
+    #[arg(long, value_enum)]
+    pub refine: Option<RefineArg>,
     /// Lose every N-th tracking frame.
     #[arg(long, value_name = "N")]
     pub lose_every: Option<usize>,
@@ -404,6 +408,28 @@ pub fn load_config(path: Option<&Path>) -> std::result::Result<Config, ConfigErr
     match path {
         Some(p) => Config::from_file(p),
         None => Ok(Config::embedded_default()),
+    }
+}
+
+/// Refinement choice on the command line (as the config's `controller.refine`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RefineArg {
+    /// The explicit tier alone (no model rollout in the solver).
+    None,
+    /// One SQP refinement per cycle.
+    Once,
+    /// One SQP refinement per sample the coming phase plays.
+    PerSample,
+}
+
+impl From<RefineArg> for capsule_mpc_generator::config::RefineMode {
+    fn from(r: RefineArg) -> Self {
+        use capsule_mpc_generator::config::RefineMode;
+        match r {
+            RefineArg::None => RefineMode::None,
+            RefineArg::Once => RefineMode::Once,
+            RefineArg::PerSample => RefineMode::PerSample,
+        }
     }
 }
 

@@ -6,8 +6,9 @@
 //! this test.
 
 use capsule_mpc_generator::config::Config;
-use capsule_mpc_runtime::controller::Sampling as RtSampling;
+use capsule_mpc_runtime::controller::{Refine, Sampling as RtSampling};
 use capsule_mpc_runtime::generated::controller::{solver, spec};
+use capsule_mpc_runtime::generated::Tier;
 use capsule_mpc_runtime::DefaultController;
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling, Scenario};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -158,4 +159,70 @@ fn controller_cycles_do_not_allocate() {
         assert_eq!(n, 0, "Solver::solve allocated");
     }
     assert!(total_calls > 300);
+}
+
+/// Both tiers: the explicit tier alone (`refine = none`) and with each
+/// refinement mode, through the controller and the solver's own calls.
+#[test]
+fn both_tiers_do_not_allocate() {
+    let config = Config::embedded_default();
+    for scenario in [Scenario::A, Scenario::C] {
+        let target_v = scenario.target_state();
+        let target: [f64; spec::NX] = target_v.as_slice().try_into().unwrap();
+        let opts = RunOptions::new(&config, target_v.clone(), Sampling::Ideal);
+        let report = run(&config, &opts).expect("closed-loop run");
+        let rows: Vec<[f64; spec::NX]> = report
+            .x
+            .iter()
+            .map(|x| x.as_slice().try_into().unwrap())
+            .collect();
+        let mut explicit_cycles = 0;
+        for refine in [Refine::None, Refine::Once, Refine::PerSample] {
+            for sampling in [
+                RtSampling::Ideal,
+                RtSampling::Constant,
+                RtSampling::Variable,
+            ] {
+                let mut settings = DefaultController::default_settings();
+                settings.sampling = sampling;
+                settings.refine = refine;
+                let mut ctl = DefaultController::new(settings, &[0.0; spec::M]).unwrap();
+                ctl.set_target(&target).unwrap();
+                let (tiers, n) = counted(|| {
+                    let mut explicit = 0;
+                    for x in &rows {
+                        let out = if sampling == RtSampling::Ideal {
+                            ctl.cycle_full_state(x).unwrap()
+                        } else {
+                            let z: [f64; spec::M] = core::array::from_fn(|i| x[2 * i]);
+                            ctl.cycle(Some(&z[..])).unwrap()
+                        };
+                        if out.solve.is_some_and(|r| r.tier == Tier::Explicit) {
+                            explicit += 1;
+                        }
+                    }
+                    explicit
+                });
+                assert_eq!(n, 0, "{refine:?} {sampling:?} allocated {n} times");
+                explicit_cycles += tiers;
+            }
+        }
+        assert!(
+            explicit_cycles > 50,
+            "the explicit tier produced only {explicit_cycles} plans"
+        );
+        let mut s = solver::Solver::new();
+        let (_, n) = counted(|| {
+            for x in &rows {
+                let mut e = *x;
+                for j in 0..spec::NX {
+                    e[j] -= target[j];
+                }
+                s.solve_explicit(&e);
+                s.adopt_explicit();
+                s.shift(1);
+            }
+        });
+        assert_eq!(n, 0, "Solver::solve_explicit allocated");
+    }
 }

@@ -77,6 +77,51 @@ fn each_config_runs_on_its_own_compiled_controller() {
     );
 }
 
+/// The three-capsule module has no explicit tier (README, "Two tiers"):
+/// `refine = none` is refused for it with the runtime's `BadSetting`, named
+/// in the error; the refinement runs. The `refine` setting does not select
+/// the compiled module (it is a runtime setting, not in the solver hash).
+#[test]
+fn the_three_capsule_module_has_no_explicit_tier() {
+    use capsule_mpc_generator::config::RefineMode;
+    use capsule_mpc_runtime::generated::PlanSolver;
+    use capsule_mpc_runtime::{Controller, RuntimeError};
+    type Three = three_capsules::solver::Solver;
+    const NX: usize = three_capsules::spec::NX;
+    const K: usize = three_capsules::spec::K;
+    const { assert!(!<Three as PlanSolver<NX, K>>::HAS_EXPLICIT_TIER) };
+    assert_eq!(three_capsules::explicit_tables::EXPLICIT_COUNT, 0);
+    assert!(three_capsules::explicit_tables::EXPLICIT_INDEX_SLOT.is_empty());
+    const {
+        assert!(
+            <controller::solver::Solver as PlanSolver<
+                { controller::spec::NX },
+                { controller::spec::K },
+            >>::HAS_EXPLICIT_TIER
+        )
+    };
+    let mut settings = Controller::<Three, NX, K>::default_settings();
+    settings.refine = capsule_mpc_runtime::controller::Refine::None;
+    assert!(matches!(
+        Controller::<Three, NX, K>::new(settings, &[0.0; 3]),
+        Err(RuntimeError::BadSetting("refine"))
+    ));
+    let mut config = three();
+    config.controller.refine = RefineMode::None;
+    assert_eq!(
+        compiled_controller_for(&config).unwrap(),
+        ControllerModule::ThreeCapsules
+    );
+    let target = vec![0.01, 0.0, 0.0, 0.0, -0.01, 0.0];
+    let err = run(&config, &RunOptions::new(&config, target, Sampling::Ideal))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("refine = none") && err.contains("three-capsule"),
+        "{err}"
+    );
+}
+
 /// A config nothing was compiled for is refused before the run, with the
 /// command that generates its controller.
 #[test]

@@ -45,7 +45,7 @@
 extern "C" {
 #endif
 
-#define CAPSULE_MPC_ABI_VERSION 3u
+#define CAPSULE_MPC_ABI_VERSION 4u
 
 /* Error codes. */
 #define CAPSULE_MPC_OK 0
@@ -67,6 +67,16 @@ extern "C" {
 #define CAPSULE_MPC_SAMPLING_IDEAL 0
 #define CAPSULE_MPC_SAMPLING_CONSTANT 1
 #define CAPSULE_MPC_SAMPLING_VARIABLE 2
+
+/* Refinement modes (capsule_mpc_set_refine). */
+#define CAPSULE_MPC_REFINE_NONE 0
+#define CAPSULE_MPC_REFINE_ONCE 1
+#define CAPSULE_MPC_REFINE_PER_SAMPLE 2
+
+/* Solver tiers (capsule_mpc_last_tier). */
+#define CAPSULE_MPC_TIER_NONE (-1)
+#define CAPSULE_MPC_TIER_EXPLICIT 0
+#define CAPSULE_MPC_TIER_REFINED 1
 
 /* Cycle status (capsule_mpc_next_actuation, capsule_mpc_last_status).
  * Whatever the status, the plan is finite and within |u| <= u_max: play it.
@@ -165,6 +175,19 @@ int32_t capsule_mpc_feed_state(capsule_mpc_t *handle, const double *state, size_
 int32_t capsule_mpc_next_actuation(capsule_mpc_t *handle, double t_actuation_start_s,
                                    double *gradients_t_per_m, size_t capacity, uint32_t *samples,
                                    int32_t *status);
+
+/* When the SQP refinement runs after the explicit tier (which always runs
+ * first; a refined plan replaces its plan only when its true cost is
+ * lower): CAPSULE_MPC_REFINE_NONE (the explicit tier alone: bounded time,
+ * no model rollout), _ONCE (one refinement per cycle), _PER_SAMPLE (one
+ * per sample the coming phase plays; the default). Any time; BAD_MODE for
+ * another value. */
+int32_t capsule_mpc_set_refine(capsule_mpc_t *handle, int32_t mode);
+
+/* Which tier produced the last cycle's plan: CAPSULE_MPC_TIER_EXPLICIT,
+ * _REFINED, or _NONE when the cycle solved nothing (before any cycle, no
+ * target, terminal hold, fallback). */
+int32_t capsule_mpc_last_tier(capsule_mpc_t *handle, int32_t *tier);
 
 /* Status of the last cycle (CAPSULE_MPC_STATUS_NO_TARGET before any). */
 int32_t capsule_mpc_last_status(capsule_mpc_t *handle, int32_t *status);

@@ -18,15 +18,15 @@
 
 #![deny(unsafe_op_in_unsafe_fn)]
 
-use capsule_mpc_runtime::controller::Sampling;
+use capsule_mpc_runtime::controller::{Refine, Sampling};
 use capsule_mpc_runtime::generated::controller::solver::Solver;
-use capsule_mpc_runtime::generated::PlanSolver;
+use capsule_mpc_runtime::generated::{PlanSolver, Tier};
 use capsule_mpc_runtime::{DefaultController, RuntimeError, RuntimeStatus};
 use core::mem::{align_of, size_of};
 use core::ptr;
 
 /// ABI version: bumped on any change of a signature, struct or constant.
-pub const CAPSULE_MPC_ABI_VERSION: u32 = 3;
+pub const CAPSULE_MPC_ABI_VERSION: u32 = 4;
 
 pub const CAPSULE_MPC_OK: i32 = 0;
 pub const CAPSULE_MPC_ERR_NULL_POINTER: i32 = -1;
@@ -46,6 +46,15 @@ pub const CAPSULE_MPC_ERR_TARGET_NOT_AT_REST: i32 = -13;
 pub const CAPSULE_MPC_SAMPLING_IDEAL: i32 = 0;
 pub const CAPSULE_MPC_SAMPLING_CONSTANT: i32 = 1;
 pub const CAPSULE_MPC_SAMPLING_VARIABLE: i32 = 2;
+
+pub const CAPSULE_MPC_REFINE_NONE: i32 = 0;
+pub const CAPSULE_MPC_REFINE_ONCE: i32 = 1;
+pub const CAPSULE_MPC_REFINE_PER_SAMPLE: i32 = 2;
+
+/// The last cycle solved nothing (no target, hold, fallback).
+pub const CAPSULE_MPC_TIER_NONE: i32 = -1;
+pub const CAPSULE_MPC_TIER_EXPLICIT: i32 = 0;
+pub const CAPSULE_MPC_TIER_REFINED: i32 = 1;
 
 pub const CAPSULE_MPC_STATUS_OK: i32 = RuntimeStatus::Ok as i32;
 pub const CAPSULE_MPC_STATUS_FALLBACK: i32 = RuntimeStatus::Fallback as i32;
@@ -86,6 +95,8 @@ pub struct CapsuleMpc {
     magic: u64,
     pending: Pending,
     last_status: RuntimeStatus,
+    /// `CAPSULE_MPC_TIER_*` of the last cycle's plan.
+    last_tier: i32,
     /// A cycle ran since init or the last reset (the sampling mode is then
     /// fixed until the next reset).
     running: bool,
@@ -256,6 +267,7 @@ pub unsafe extern "C" fn capsule_mpc_init(
             magic: MAGIC,
             pending: Pending::Nothing,
             last_status: RuntimeStatus::NoTarget,
+            last_tier: CAPSULE_MPC_TIER_NONE,
             running: false,
             controller,
         };
@@ -480,6 +492,13 @@ pub unsafe extern "C" fn capsule_mpc_next_actuation(
         .map_err(map_err)?;
         ws.pending = Pending::Nothing;
         ws.last_status = out.status;
+        ws.last_tier = match out.solve {
+            Some(r) if out.status != RuntimeStatus::Fallback => match r.tier {
+                Tier::Explicit => CAPSULE_MPC_TIER_EXPLICIT,
+                Tier::Refined => CAPSULE_MPC_TIER_REFINED,
+            },
+            _ => CAPSULE_MPC_TIER_NONE,
+        };
         ws.running = true;
         let len = capacity.min(K);
         // SAFETY: the pointers were checked above; the caller guarantees
@@ -490,6 +509,48 @@ pub unsafe extern "C" fn capsule_mpc_next_actuation(
             write_out(samples, out.actuation_samples as u32);
             write_out(status, out.status as i32);
         }
+        Ok(())
+    })();
+    code(r)
+}
+
+/// When the SQP refinement runs after the explicit tier:
+/// `CAPSULE_MPC_REFINE_NONE` (the explicit tier alone), `_ONCE` (one
+/// refinement per cycle) or `_PER_SAMPLE` (one per sample the coming phase
+/// plays; the default). Allowed at any time; BAD_MODE for another value.
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_set_refine(handle: *mut CapsuleMpc, mode: i32) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; workspace checks the handle.
+        let ws = unsafe { workspace(handle) }?;
+        let refine = match mode {
+            CAPSULE_MPC_REFINE_NONE => Refine::None,
+            CAPSULE_MPC_REFINE_ONCE => Refine::Once,
+            CAPSULE_MPC_REFINE_PER_SAMPLE => Refine::PerSample,
+            _ => return Err(CAPSULE_MPC_ERR_BAD_MODE),
+        };
+        ws.controller.set_refine(refine).map_err(map_err)
+    })();
+    code(r)
+}
+
+/// Which tier produced the last cycle's plan (`CAPSULE_MPC_TIER_*`;
+/// `_NONE` when it solved nothing: before any cycle, no target, the
+/// terminal hold or the fallback).
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`; `tier` valid for one write.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_last_tier(handle: *mut CapsuleMpc, tier: *mut i32) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; the helpers check pointers.
+        let ws = unsafe { workspace(handle) }?;
+        check_ptr(tier)?;
+        // SAFETY: checked above.
+        unsafe { write_out(tier, ws.last_tier) };
         Ok(())
     })();
     code(r)

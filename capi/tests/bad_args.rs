@@ -216,6 +216,12 @@ fn every_handle_fn_returns(h: *mut CapsuleMpc, expected: i32) {
             "last_status"
         );
         assert_eq!(
+            capsule_mpc_set_refine(h, CAPSULE_MPC_REFINE_NONE),
+            expected,
+            "set_refine"
+        );
+        assert_eq!(capsule_mpc_last_tier(h, &mut status), expected, "last_tier");
+        assert_eq!(
             capsule_mpc_estimate(h, x.as_mut_ptr(), 4),
             expected,
             "estimate"
@@ -371,6 +377,74 @@ fn set_sampling_bad_mode() {
                 CAPSULE_MPC_OK,
                 "mode {mode}"
             );
+        }
+    }
+}
+
+/// Unknown refinement modes are refused and change nothing; the tier of
+/// the last plan follows the mode (explicit alone, or the refinement's
+/// choice), NONE before any cycle; a null tier pointer is refused.
+#[test]
+fn set_refine_bad_mode_and_last_tier() {
+    let mut b = initialized();
+    let h = handle(&mut b);
+    let mut grads = [0.0; 256];
+    let (mut samples, mut status, mut tier) = (0u32, 0i32, 7i32);
+    unsafe {
+        assert_eq!(capsule_mpc_last_tier(h, &mut tier), CAPSULE_MPC_OK);
+        assert_eq!(tier, CAPSULE_MPC_TIER_NONE);
+        assert_eq!(
+            capsule_mpc_last_tier(h, null_mut()),
+            CAPSULE_MPC_ERR_NULL_POINTER
+        );
+        for mode in [-1, 3, 100, i32::MIN, i32::MAX] {
+            assert_eq!(
+                capsule_mpc_set_refine(h, mode),
+                CAPSULE_MPC_ERR_BAD_MODE,
+                "mode {mode}"
+            );
+        }
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_set_refine(h, CAPSULE_MPC_REFINE_NONE),
+            CAPSULE_MPC_OK
+        );
+        let mut t = T_ACT;
+        let mut tiers = Vec::new();
+        for mode in [CAPSULE_MPC_REFINE_NONE, CAPSULE_MPC_REFINE_ONCE] {
+            assert_eq!(capsule_mpc_set_refine(h, mode), CAPSULE_MPC_OK);
+            for _ in 0..3 {
+                assert_eq!(
+                    capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, t - 0.02, 0),
+                    CAPSULE_MPC_OK
+                );
+                assert_eq!(
+                    capsule_mpc_next_actuation(
+                        h,
+                        t,
+                        grads.as_mut_ptr(),
+                        grads.len(),
+                        &mut samples,
+                        &mut status
+                    ),
+                    CAPSULE_MPC_OK
+                );
+                assert_eq!(capsule_mpc_last_tier(h, &mut tier), CAPSULE_MPC_OK);
+                tiers.push((mode, tier));
+                t += 0.02 * samples as f64 + 0.02;
+            }
+        }
+        // The explicit tier alone always reports itself; with refinement
+        // each cycle names one of the two tiers.
+        for (mode, tier) in tiers {
+            if mode == CAPSULE_MPC_REFINE_NONE {
+                assert_eq!(tier, CAPSULE_MPC_TIER_EXPLICIT);
+            } else {
+                assert!(tier == CAPSULE_MPC_TIER_EXPLICIT || tier == CAPSULE_MPC_TIER_REFINED);
+            }
         }
     }
 }

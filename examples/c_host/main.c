@@ -9,7 +9,7 @@
  * controller returns (20 ms each), time-stamped on the host's clock.
  * Scenario C: target (0.02, 0, -0.01, 0) m from rest at the origin.
  *
- * Usage: c_host [mode] [noise_m] [tracking_s] [glitch_frames] [glitch_m]
+ * Usage: c_host [mode] [noise_m] [tracking_s] [glitch_frames] [glitch_m] [refine]
  *        mode 0 ideal, 1 constant (default), 2 variable; noise_m: amplitude
  *        of deterministic measurement noise (default 5e-5 m); tracking_s:
  *        tracking phase length (default 0.02; 0 = jitter 10-60 ms);
@@ -93,6 +93,8 @@ int main(int argc, char **argv) {
     double tracking_s = argc > 3 ? atof(argv[3]) : TRACKING_S;
     int glitch_frames = argc > 4 ? atoi(argv[4]) : 0;
     double glitch_m = argc > 5 ? atof(argv[5]) : 0.05;
+    /* CAPSULE_MPC_REFINE_*: when the SQP refinement runs after the explicit tier. */
+    int refine = argc > 6 ? atoi(argv[6]) : CAPSULE_MPC_REFINE_PER_SAMPLE;
 
     uint32_t capsules = 0, horizon = 0, plan_len = 0;
     double dt_s = 0.0, u_max = 0.0;
@@ -113,6 +115,7 @@ int main(int argc, char **argv) {
     CHECK(capsule_mpc_init(workspace, sizeof workspace, start, NCAP));
     capsule_mpc_t *h = (capsule_mpc_t *)workspace;
     CHECK(capsule_mpc_set_sampling(h, mode));
+    CHECK(capsule_mpc_set_refine(h, refine));
     CHECK(capsule_mpc_set_target(h, target, 2 * NCAP));
 
     double s[2 * NCAP] = {start[0], 0.0, start[1], 0.0};
@@ -121,6 +124,7 @@ int main(int argc, char **argv) {
     uint32_t seed = 12345u, jitter_seed = 777u;
     int cycles = 0, non_ok = 0, glitched = 0;
     int counts[16] = {0};
+    int tier_explicit = 0, tier_refined = 0;
     /* Settled = both positions within TOL_M of the target and both speeds
      * below SPEED_TOL for HELD_S in a row; it must start by the deadline. */
     double deadline_s = tracking_s == TRACKING_S ? SIM_END_S : LONG_TRACKING_DEADLINE_S;
@@ -152,6 +156,10 @@ int main(int argc, char **argv) {
         CHECK(capsule_mpc_next_actuation(h, t, grads, plan_len, &samples, &status));
         if (status != CAPSULE_MPC_STATUS_OK) non_ok++;
         if (status >= 0 && status < 16) counts[status]++;
+        int32_t tier = CAPSULE_MPC_TIER_NONE;
+        CHECK(capsule_mpc_last_tier(h, &tier));
+        if (tier == CAPSULE_MPC_TIER_EXPLICIT) tier_explicit++;
+        if (tier == CAPSULE_MPC_TIER_REFINED) tier_refined++;
         for (uint32_t k = 0; k < samples; k++) {
             double u = grads[k];
             if (!(fabs(u) <= u_max)) {
@@ -177,6 +185,8 @@ int main(int argc, char **argv) {
            counts[CAPSULE_MPC_STATUS_OK], counts[CAPSULE_MPC_STATUS_FALLBACK],
            counts[CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED], counts[CAPSULE_MPC_STATUS_MEASUREMENT_LOST],
            counts[CAPSULE_MPC_STATUS_REACQUIRED], counts[CAPSULE_MPC_STATUS_RECOVERING]);
+    printf("# plans from the explicit tier %d, from the refinement %d (refine mode %d)\n", tier_explicit,
+           tier_refined, refine);
     printf("# end t %.3f s after %d cycles (%d not OK): x1 %.6f m, x2 %.6f m, v1 %.2e, v2 %.2e\n", t, cycles,
            non_ok, s[0], s[2], s[1], s[3]);
     if (glitch_frames > 0) printf("# last glitch frame at %.3f s\n", last_bad_s);

@@ -56,6 +56,19 @@ pub struct SolveReport {
     pub qp_iterations: u32,
     /// Largest active-set iteration count of one QP in this step.
     pub max_qp_iterations: u32,
+    /// Which tier produced the plan.
+    pub tier: Tier,
+}
+
+/// The two tiers of the online solver.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tier {
+    /// The explicit tier: a stored plan sample's window QP, linearized
+    /// offline, solved at the state's deviation (no model rollout).
+    Explicit,
+    /// The SQP refinement (Gauss-Newton on the nonlinear rollout) replaced
+    /// the explicit plan with a cheaper one.
+    Refined,
 }
 
 /// One leg of a move: the stored plan from rest at `start_offset_m`
@@ -111,8 +124,20 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// samples, each followed by `coast_s` of zero gradient (tracking +
     /// delay); `coast_s = 0` for back-to-back samples.
     fn set_schedule(&mut self, samples_per_phase: usize, coast_s: f64);
-    /// Refines the plan from relative state `e`.
+    /// Refines the plan from relative state `e` (SQP on the nonlinear
+    /// model). A plan from `solve_explicit` since the last call competes
+    /// on its true cost, so the result never costs more than it.
     fn solve(&mut self, e: &[f64; NX]) -> SolveReport;
+    /// Whether the explicit tier has data (false without tables).
+    const HAS_EXPLICIT_TIER: bool;
+    /// Certified worst-case floating-point operations of one explicit step.
+    const EXPLICIT_CERTIFIED_OPS: u64;
+    /// The explicit tier from `e`: no rollout, no Jacobians; its plan
+    /// becomes a candidate (see `solve`, `adopt_explicit`). `OutOfRange`
+    /// outside the index.
+    fn solve_explicit(&mut self, e: &[f64; NX]) -> SolveReport;
+    /// Makes the last explicit plan the current plan.
+    fn adopt_explicit(&mut self);
     /// Current plan, T/m per sample.
     fn plan(&self) -> &[f64; K];
     /// Whether a start at rest at relative positions `e` is covered.

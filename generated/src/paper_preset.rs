@@ -156,6 +156,65 @@ pub mod tables {
     /// when not measured; see `qp_iteration_map.rs`).
     pub static QP_ITERATION_MAP: &[u8] = crate::qp_iteration_map::PAPER_PRESET;
 }
+/// The explicit tier's data: the window QP of every stored plan
+/// sample the index (or the fine grid) names, linearized offline
+/// around that sample (see `capsule-mpc-generator`'s `explicit`).
+pub mod explicit_tables {
+    use super::spec::{N, NX};
+    /// Entries of an N x N symmetric matrix's upper triangle.
+    pub const HESSIAN_LEN: usize = N * (N + 1) / 2;
+    /// One stored sample's window QP as a function of the deviation
+    /// d = e - state: min 1/2 x'Hx + (sensitivity d)'x over the
+    /// window's input changes x (tracking the stored trajectory; SI,
+    /// the cost halved as in the refinement's QP).
+    #[derive(Debug, Clone, Copy)]
+    pub struct ExplicitSample {
+        /// Plan table: 0 back to back, 1 constant sampling, 2 fine,
+        /// 3 fine with the coast.
+        pub source: u8,
+        pub plan: u16,
+        /// Plan sample the window starts at.
+        pub offset: u16,
+        /// The stored relative state there (linearization point).
+        pub state: [f64; NX],
+        /// Condensed Hessian, upper triangle row by row.
+        pub hessian: [f64; HESSIAN_LEN],
+        /// Gradient of the online cost in the window inputs at zero
+        /// deviation (for the cost prediction).
+        pub gradient: [f64; N],
+        /// d gradient / d deviation.
+        pub sensitivity: [[f64; NX]; N],
+        /// Active set of the solution at zero deviation (-1, 0, +1).
+        pub active: [i8; N],
+        /// Nonlinear cost of the stored tail from `state`.
+        pub cost: f64,
+        /// Gauss-Newton model of that cost in d (halved, as the QP).
+        pub cost_gradient: [f64; NX],
+        pub cost_hessian: [[f64; NX]; NX],
+        /// Slot of the same plan's next sample (NO_SLOT: not stored).
+        pub next: u16,
+    }
+    /// Number of stored samples.
+    pub const EXPLICIT_COUNT: usize = 0usize;
+    /// Slot value of a cell without a sample.
+    pub const NO_SLOT: u16 = 65535u16;
+    pub static EXPLICIT: [ExplicitSample; EXPLICIT_COUNT] = [];
+    /// Per kept cell of the sparse warm-start index (parallel to
+    /// `tables::INDEX_CELLS`; empty without an explicit tier): the
+    /// slot of its sample (back to back, and constant sampling's).
+    pub static EXPLICIT_INDEX_SLOT: [u16; 0usize] = [];
+    pub static COASTED_EXPLICIT_INDEX_SLOT: [u16; 0usize] = [];
+    /// Per fine grid point: the slot of its plan's first sample.
+    pub static FINE_EXPLICIT_SLOT: [u16; 0usize] = [];
+    pub static COASTED_FINE_EXPLICIT_SLOT: [u16; 0usize] = [];
+    /// Bytes of the arrays above.
+    pub const EXPLICIT_TABLE_BYTES: usize = 0usize;
+    /// Certified worst case of one explicit step: floating-point
+    /// operations counted from the loop bounds with the QP at its
+    /// iteration cap (`QP_MAX_ITERATIONS`), every iteration at its
+    /// worst (all variables free, the factor rebuilt).
+    pub const EXPLICIT_CERTIFIED_OPS: u64 = 36822u64;
+}
 pub mod solver {
     //! Fixed-size online solver: refines a long plan with Gauss-Newton SQP steps
     //! on a window of N inputs, the tail's cost-to-go as terminal cost.
@@ -169,7 +228,7 @@ pub mod solver {
     //! true nonlinear cost decreases. No heap, no recursion, fixed loop bounds.
     use super::spec::*;
     use super::tables::*;
-    use crate::{Leg, PlanSolver, SolveReport, SolveStatus};
+    use crate::{Leg, PlanSolver, SolveReport, SolveStatus, Tier};
     /// Per-capsule 2x2 Jacobian (row major) and input column of one sample.
     #[derive(Debug, Clone, Copy)]
     struct StepJacobian {
@@ -199,6 +258,14 @@ pub mod solver {
         qp: BoxQp,
         /// The actuation schedule the plan is refined for.
         schedule: Schedule,
+        /// The explicit tier's plan of this step (see `solve_explicit`), a
+        /// candidate for `plan` until the next `solve` or `adopt_explicit`.
+        explicit_plan: [f64; K],
+        explicit_ready: bool,
+        /// Slot of the explicit tier's last stored sample (usize::MAX: none).
+        explicit_slot: usize,
+        /// Which tier produced `plan`.
+        tier: Tier,
     }
     /// How the scanner plays the plan: actuation phases of `samples_per_phase`
     /// samples back to back, each followed by a zero-gradient coast (tracking
@@ -276,6 +343,10 @@ pub mod solver {
                 tail_grad: [0.0; NX],
                 qp: BoxQp::new(),
                 schedule: Schedule::BACK_TO_BACK,
+                explicit_plan: [0.0; K],
+                explicit_ready: false,
+                explicit_slot: usize::MAX,
+                tier: Tier::Refined,
             }
         }
         /// Sets the actuation schedule the plan is refined for.
@@ -286,12 +357,70 @@ pub mod solver {
         pub fn reset(&mut self) {
             self.plan = [0.0; K];
             self.has_plan = false;
+            self.explicit_ready = false;
+            self.explicit_slot = usize::MAX;
+        }
+        /// The explicit tier from `e` (see the `explicit` module): the stored
+        /// sample's window QP at the deviation, no rollout. The plan becomes a
+        /// candidate: `adopt_explicit` makes it the plan, or the next `solve`
+        /// weighs it by its true cost. `cost` in the report is the
+        /// Gauss-Newton model's prediction, not a rollout.
+        pub fn solve_explicit(&mut self, e: &[f64; NX]) -> SolveReport {
+            let mut report = SolveReport {
+                status: SolveStatus::Refined,
+                cost: 0.0,
+                took_table_plan: true,
+                qp_iterations: 0,
+                max_qp_iterations: 0,
+                tier: Tier::Explicit,
+            };
+            let coasted = self.schedule.coasted();
+            match super::explicit::explicit_plan(
+                e,
+                coasted,
+                self.explicit_slot,
+                &mut self.qp,
+                &mut self.explicit_plan,
+            ) {
+                Some(out) => {
+                    self.explicit_ready = true;
+                    self.explicit_slot = out.slot;
+                    report.cost = out.predicted_cost;
+                    report.qp_iterations = out.qp_iterations;
+                    report.max_qp_iterations = out.qp_iterations;
+                    if !out.converged {
+                        report.status = SolveStatus::IterationLimit;
+                    }
+                }
+                None => {
+                    self.explicit_ready = false;
+                    self.explicit_slot = usize::MAX;
+                    report.status = SolveStatus::OutOfRange;
+                    report.cost = f64::INFINITY;
+                    report.took_table_plan = false;
+                }
+            }
+            report
+        }
+        /// Makes the explicit tier's plan (from `solve_explicit`) the plan.
+        pub fn adopt_explicit(&mut self) {
+            if self.explicit_ready {
+                self.plan = self.explicit_plan;
+                self.has_plan = true;
+                self.explicit_ready = false;
+                self.tier = Tier::Explicit;
+            }
+        }
+        /// The explicit tier's plan of the last `solve_explicit`.
+        pub fn explicit_plan(&self) -> &[f64; K] {
+            &self.explicit_plan
         }
         /// The current plan (gradient per sample, T/m), `plan()[0]` first.
         pub fn plan(&self) -> &[f64; K] {
             &self.plan
         }
-        /// Predicted relative states along the plan (valid after `solve`).
+        /// Predicted relative states along the refined plan (valid after a
+        /// `solve` whose report names `Tier::Refined`).
         pub fn predicted_states(&self) -> &[[f64; NX]; K + 1] {
             &self.states
         }
@@ -330,6 +459,7 @@ pub mod solver {
                 took_table_plan: false,
                 qp_iterations: 0,
                 max_qp_iterations: 0,
+                tier: self.tier,
             };
             let mut fresh = false;
             let mut cost = if self.has_plan {
@@ -366,15 +496,26 @@ pub mod solver {
                             cost = c;
                             fresh = false;
                             report.took_table_plan = true;
+                            self.tier = Tier::Refined;
                         }
                     }
-                    None if !self.has_plan => {
+                    None if !self.has_plan && !self.explicit_ready => {
                         report.status = SolveStatus::OutOfRange;
                         report.cost = f64::INFINITY;
                         return report;
                     }
                     None => {}
                 }
+            }
+            self.tier = Tier::Refined;
+            let mut explicit_pending = self.explicit_ready;
+            self.explicit_ready = false;
+            if explicit_pending && cost == f64::INFINITY {
+                self.plan = self.explicit_plan;
+                cost = rollout_cost(e, &self.plan, &self.schedule);
+                fresh = false;
+                self.tier = Tier::Explicit;
+                explicit_pending = false;
             }
             self.has_plan = true;
             let mut it = 0;
@@ -390,6 +531,9 @@ pub mod solver {
                 }
                 let (new_cost, qp_iters, converged) = self.sqp_iteration(e, cost);
                 fresh = !(new_cost < cost);
+                if new_cost < cost {
+                    self.tier = Tier::Refined;
+                }
                 cost = new_cost;
                 report.qp_iterations += qp_iters;
                 if qp_iters > report.max_qp_iterations {
@@ -400,7 +544,16 @@ pub mod solver {
                 }
                 it += 1;
             }
+            if explicit_pending {
+                let c = rollout_cost_below(e, &self.explicit_plan, &self.schedule, cost);
+                if c < cost {
+                    self.plan = self.explicit_plan;
+                    cost = c;
+                    self.tier = Tier::Explicit;
+                }
+            }
             report.cost = cost;
+            report.tier = self.tier;
             report
         }
         /// One SQP iteration from the rolled-out `states` and `jac` of `plan`;
@@ -593,8 +746,25 @@ pub mod solver {
         /// Returns (iterations, converged). On the iteration bound, `x` is the
         /// last feasible iterate (always within the box).
         pub fn solve(&mut self) -> (u32, bool) {
-            self.x = [0.0; N];
-            self.active = [0; N];
+            self.solve_from(&[0; N])
+        }
+        /// As `solve`, warm-started from the active set `active` (-1 lower,
+        /// +1 upper, 0 free): the start puts active variables on their bounds
+        /// and free ones at 0, which is feasible since lo <= 0 <= hi.
+        pub fn solve_from(&mut self, active: &[i8; N]) -> (u32, bool) {
+            let mut j = 0;
+            while j < N {
+                let a = active[j];
+                self.active[j] = if a > 0 { 1 } else if a < 0 { -1 } else { 0 };
+                self.x[j] = if a > 0 {
+                    self.hi[j]
+                } else if a < 0 {
+                    self.lo[j]
+                } else {
+                    0.0
+                };
+                j += 1;
+            }
             self.factored = 0;
             let mut iter = 0u32;
             while (iter as usize) < QP_MAX_ITERATIONS {
@@ -774,7 +944,7 @@ pub mod solver {
             }
         }
     }
-    fn clamp_u(u: f64) -> f64 {
+    pub fn clamp_u(u: f64) -> f64 {
         if u > U_MAX_T_PER_M {
             U_MAX_T_PER_M
         } else if u < -U_MAX_T_PER_M {
@@ -783,7 +953,7 @@ pub mod solver {
             u
         }
     }
-    fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
+    pub fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
         let f = (v - axis.start) / axis.step;
         if !(f > -0.5 && f < axis.count as f64 - 0.5) {
             return None;
@@ -792,10 +962,10 @@ pub mod solver {
     }
     /// Bisection probes that find any cell among `INDEX_CELLS` (2^64 > any count).
     const INDEX_PROBES: usize = 64;
-    /// The slot of `e`'s cell among the kept cells of the sparse warm-start
-    /// index (`INDEX_CELLS`); None outside the index grid or in a cell no
-    /// stored plan passes near.
-    pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
+    /// The row-major number of `e`'s cell on the (dense) warm-start index grid
+    /// (position, speed axes alternating, the last axis fastest); None outside
+    /// the grid.
+    pub fn index_flat(e: &[f64; NX]) -> Option<u64> {
         let mut flat = 0u64;
         let mut j = 0;
         while j < NX {
@@ -803,7 +973,15 @@ pub mod solver {
             flat = flat * axis.count as u64 + axis_nearest(axis, e[j])? as u64;
             j += 1;
         }
-        let (mut lo, mut hi) = (0usize, INDEX_CELLS.len());
+        Some(flat)
+    }
+    /// The first position in `INDEX_CELLS[lo..hi]` whose cell number is not
+    /// below `flat` (`hi` if none), by bisection: `INDEX_PROBES` probes at most.
+    pub fn index_lower_bound(flat: u64, lo: usize, hi: usize) -> usize {
+        let (mut lo, mut hi) = (
+            lo,
+            if hi < INDEX_CELLS.len() { hi } else { INDEX_CELLS.len() },
+        );
         let mut probes = 0;
         while lo < hi && probes < INDEX_PROBES {
             let mid = lo + (hi - lo) / 2;
@@ -814,7 +992,20 @@ pub mod solver {
             }
             probes += 1;
         }
+        lo
+    }
+    /// The slot among the kept cells of the sparse warm-start index
+    /// (`INDEX_CELLS`) of the cell numbered `flat` (see `index_flat`); None
+    /// when no stored plan passes near that cell (it is not kept).
+    pub fn kept_slot(flat: u64) -> Option<usize> {
+        let lo = index_lower_bound(flat, 0, INDEX_CELLS.len());
         if lo < INDEX_CELLS.len() && INDEX_CELLS[lo] == flat { Some(lo) } else { None }
+    }
+    /// The slot of `e`'s cell among the kept cells of the sparse warm-start
+    /// index (`INDEX_CELLS`); None outside the index grid or in a cell no
+    /// stored plan passes near.
+    pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
+        kept_slot(index_flat(e)?)
     }
     /// Most QP iterations measured offline in the index cell of `e` (0: not
     /// measured, or outside the index).
@@ -1205,6 +1396,8 @@ pub mod solver {
         const TABLE_BYTES: usize = TABLE_BYTES;
         const WORKSPACE_MIN_M: f64 = WORKSPACE_MIN_M;
         const WORKSPACE_MAX_M: f64 = WORKSPACE_MAX_M;
+        const HAS_EXPLICIT_TIER: bool = super::explicit_tables::EXPLICIT_COUNT > 0;
+        const EXPLICIT_CERTIFIED_OPS: u64 = super::explicit_tables::EXPLICIT_CERTIFIED_OPS;
         fn new() -> Self {
             Solver::new()
         }
@@ -1219,6 +1412,12 @@ pub mod solver {
         }
         fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
             Solver::solve(self, e)
+        }
+        fn solve_explicit(&mut self, e: &[f64; NX]) -> SolveReport {
+            Solver::solve_explicit(self, e)
+        }
+        fn adopt_explicit(&mut self) {
+            Solver::adopt_explicit(self)
         }
         fn plan(&self) -> &[f64; K] {
             Solver::plan(self)
@@ -1265,5 +1464,260 @@ pub mod solver {
         ) -> ([f64; 2], [f64; 4]) {
             capsule_transition(i, xv, u, duration_s)
         }
+    }
+}
+pub mod explicit {
+    //! The explicit tier: a first answer with no model rollout.
+    //!
+    //! Every step: (1) look the state up (the fine end-game grid at rest, else
+    //! the warm-start index) and take the nearest of the stored samples named
+    //! by its cell, the 2 NX neighbouring cells and the previous step's
+    //! successor on its plan; (2) the deviation d = e - (the sample's stored
+    //! state); (3) the window QP's gradient F d from the stored sensitivities,
+    //! its Hessian and the box of the stored plan's inputs; (4) the box QP,
+    //! warm-started from the active set of the stored solution; (5) plan =
+    //! stored inputs + the QP's step, clamped, then the stored tail. The linearization was done
+    //! offline (`capsule-mpc-generator`'s `explicit`); every loop here has a
+    //! constant bound, and the QP stops at `QP_MAX_ITERATIONS`, so the
+    //! operation count is bounded by `EXPLICIT_CERTIFIED_OPS`.
+    use super::explicit_tables::*;
+    use super::solver::{
+        axis_nearest, clamp_u, index_lower_bound, BoxQp, FINE_REST_SPEED_M_PER_S,
+    };
+    use super::spec::*;
+    use super::tables::*;
+    /// What one explicit step produced besides the plan.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct ExplicitOutcome {
+        /// The stored sample used (index into `EXPLICIT`).
+        pub slot: usize,
+        /// Active-set iterations of the QP.
+        pub qp_iterations: u32,
+        /// Whether the QP converged within `QP_MAX_ITERATIONS`.
+        pub converged: bool,
+        /// The Gauss-Newton model's prediction of the plan's nonlinear cost
+        /// (no rollout; the refinement measures the true cost).
+        pub predicted_cost: f64,
+    }
+    /// The stored sample for relative state `e`: at rest on the fine grid,
+    /// the fine plan's (the index's nearest sample there is a finished plan,
+    /// which cannot separate capsules at rest); otherwise the nearest (in
+    /// index cells) of the samples named by the cell of `e`, its 2 NX
+    /// neighbours along the axes (those the sparse index keeps; a cell is
+    /// found by bisection over `INDEX_CELLS`), and the successor of `last` (the previous
+    /// step's sample; `usize::MAX`: none). Why not the cell's own sample
+    /// alone: it was chosen by its cost from the cell's centre, and a cell is
+    /// 0.1 m/s wide in speed; linearized around it, the deviation reached
+    /// 0.1 m/s and consecutive steps jumped between plans.
+    pub fn explicit_slot(e: &[f64; NX], coasted: bool, last: usize) -> Option<usize> {
+        if let Some(slot) = fine_slot(e, coasted) {
+            return Some(slot);
+        }
+        let slots = if coasted {
+            &COASTED_EXPLICIT_INDEX_SLOT
+        } else {
+            &EXPLICIT_INDEX_SLOT
+        };
+        let mut idx = [0usize; NX];
+        let mut flat = 0u64;
+        let mut j = 0;
+        while j < NX {
+            let axis = axis_of(j);
+            idx[j] = axis_nearest(&axis, e[j])?;
+            flat = flat * axis.count as u64 + idx[j] as u64;
+            j += 1;
+        }
+        let mut best = usize::MAX;
+        let mut best_distance = f64::INFINITY;
+        let cells = INDEX_CELLS.len();
+        let split = index_lower_bound(flat, 0, cells);
+        consider(
+            e,
+            slot_of_cell(slots, flat, split, cells),
+            &mut best,
+            &mut best_distance,
+        );
+        let mut stride = 1u64;
+        let mut j = NX;
+        while j > 0 {
+            j -= 1;
+            let count = axis_of(j).count;
+            if idx[j] > 0 {
+                let slot = slot_of_cell(slots, flat - stride, 0, split);
+                consider(e, slot, &mut best, &mut best_distance);
+            }
+            if idx[j] + 1 < count {
+                let slot = slot_of_cell(slots, flat + stride, split, cells);
+                consider(e, slot, &mut best, &mut best_distance);
+            }
+            stride *= count as u64;
+        }
+        if last < EXPLICIT_COUNT {
+            consider(e, EXPLICIT[last].next as usize, &mut best, &mut best_distance);
+        }
+        if best < EXPLICIT_COUNT { Some(best) } else { None }
+    }
+    fn axis_of(j: usize) -> Axis {
+        if j % 2 == 0 { INDEX_POSITION_AXIS } else { INDEX_SPEED_AXIS }
+    }
+    /// The explicit slot of the cell numbered `flat` (row-major on the dense
+    /// grid) if it is kept, looked for among `INDEX_CELLS[lo..hi]`;
+    /// `usize::MAX` otherwise.
+    fn slot_of_cell(slots: &[u16], flat: u64, lo: usize, hi: usize) -> usize {
+        let kept = index_lower_bound(flat, lo, hi);
+        if kept >= hi || kept >= INDEX_CELLS.len() || INDEX_CELLS[kept] != flat {
+            return usize::MAX;
+        }
+        match slots.get(kept) {
+            Some(&s) if s != NO_SLOT => s as usize,
+            _ => usize::MAX,
+        }
+    }
+    /// Keeps `slot` in `best` if its stored state is nearer to `e` (squared
+    /// distance in index cells) than the best so far.
+    fn consider(e: &[f64; NX], slot: usize, best: &mut usize, best_distance: &mut f64) {
+        if slot >= EXPLICIT_COUNT {
+            return;
+        }
+        let state = &EXPLICIT[slot].state;
+        let mut dist = 0.0;
+        let mut j = 0;
+        while j < NX {
+            let r = (e[j] - state[j]) / axis_of(j).step;
+            dist += r * r;
+            j += 1;
+        }
+        if dist < *best_distance {
+            *best_distance = dist;
+            *best = slot;
+        }
+    }
+    fn fine_slot(e: &[f64; NX], coasted: bool) -> Option<usize> {
+        if FINE_COUNT == 0 {
+            return None;
+        }
+        let mut flat = 0usize;
+        let mut i = 0;
+        while i < M {
+            if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S) {
+                return None;
+            }
+            flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, e[2 * i])?;
+            i += 1;
+        }
+        let slots = if coasted {
+            &COASTED_FINE_EXPLICIT_SLOT
+        } else {
+            &FINE_EXPLICIT_SLOT
+        };
+        let slot = *slots.get(flat)?;
+        if slot == NO_SLOT || slot as usize >= EXPLICIT_COUNT {
+            return None;
+        }
+        Some(slot as usize)
+    }
+    /// The stored inputs of sample `s`'s plan from its offset on, zero-padded.
+    fn stored_tail(s: &ExplicitSample, out: &mut [f64; K]) {
+        let p = s.plan as usize;
+        let row: &[f64; K] = match s.source {
+            0 => &PLAN_U[p],
+            1 => &COASTED_PLAN_U[p],
+            2 => &FINE_PLAN_U[p],
+            _ => &COASTED_FINE_PLAN_U[p],
+        };
+        let offset = s.offset as usize;
+        let mut i = 0;
+        while i < K {
+            out[i] = if offset + i < K { row[offset + i] } else { 0.0 };
+            i += 1;
+        }
+    }
+    /// Loads sample `s`'s window QP at deviation `d` into `qp`, with the box
+    /// around the stored window inputs `u`.
+    pub fn load_qp(s: &ExplicitSample, d: &[f64; NX], u: &[f64; K], qp: &mut BoxQp) {
+        let mut idx = 0;
+        let mut a = 0;
+        while a < N {
+            let mut b = a;
+            while b < N {
+                qp.h[a][b] = s.hessian[idx];
+                qp.h[b][a] = s.hessian[idx];
+                idx += 1;
+                b += 1;
+            }
+            let mut g = 0.0;
+            let mut j = 0;
+            while j < NX {
+                g += s.sensitivity[a][j] * d[j];
+                j += 1;
+            }
+            qp.g[a] = g;
+            qp.lo[a] = -U_MAX_T_PER_M - u[a];
+            qp.hi[a] = U_MAX_T_PER_M - u[a];
+            a += 1;
+        }
+    }
+    /// The explicit plan for relative state `e` into `out` (`coasted`:
+    /// constant sampling's tables; `last`: the previous step's slot, or
+    /// `usize::MAX`); None outside the index and the fine grid.
+    pub fn explicit_plan(
+        e: &[f64; NX],
+        coasted: bool,
+        last: usize,
+        qp: &mut BoxQp,
+        out: &mut [f64; K],
+    ) -> Option<ExplicitOutcome> {
+        let slot = explicit_slot(e, coasted, last)?;
+        let s = &EXPLICIT[slot];
+        stored_tail(s, out);
+        let mut d = [0.0; NX];
+        let mut j = 0;
+        while j < NX {
+            d[j] = e[j] - s.state[j];
+            j += 1;
+        }
+        load_qp(s, &d, out, qp);
+        let (iterations, converged) = qp.solve_from(&s.active);
+        let mut a = 0;
+        while a < N {
+            out[a] = clamp_u(out[a] + qp.x[a]);
+            a += 1;
+        }
+        Some(ExplicitOutcome {
+            slot,
+            qp_iterations: iterations,
+            converged,
+            predicted_cost: predicted_cost(s, &d, qp),
+        })
+    }
+    /// The Gauss-Newton model of the plan's cost: the stored tail's cost plus
+    /// the first and second order terms in the deviation and the step (the
+    /// model is of half the cost, as the QP, hence the factor 2).
+    fn predicted_cost(s: &ExplicitSample, d: &[f64; NX], qp: &BoxQp) -> f64 {
+        let mut half = 0.0;
+        let mut r = 0;
+        while r < NX {
+            let mut hd = 0.0;
+            let mut c = 0;
+            while c < NX {
+                hd += s.cost_hessian[r][c] * d[c];
+                c += 1;
+            }
+            half += d[r] * (s.cost_gradient[r] + 0.5 * hd);
+            r += 1;
+        }
+        let mut a = 0;
+        while a < N {
+            let mut hx = 0.0;
+            let mut b = 0;
+            while b < N {
+                hx += qp.h[a][b] * qp.x[b];
+                b += 1;
+            }
+            half += qp.x[a] * (s.gradient[a] + qp.g[a] + 0.5 * hx);
+            a += 1;
+        }
+        let c = s.cost + 2.0 * half;
+        if c > 0.0 { c } else { 0.0 }
     }
 }

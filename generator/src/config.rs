@@ -247,6 +247,29 @@ pub struct ControllerConfig {
     /// sigma of the switching rule (17), 0 < sigma < 1.
     #[serde(default = "default_sigma")]
     pub switching_sigma: f64,
+    /// When the runtime's SQP refinement runs after the explicit tier.
+    /// Skipped in the serialized form at its default, so configs that do
+    /// not set it hash (and match their tables) as before.
+    #[serde(default, skip_serializing_if = "RefineMode::is_default")]
+    pub refine: RefineMode,
+}
+
+/// `controller.refine`: `none` (the explicit tier alone), `once` (one
+/// refinement per cycle) or `per-sample` (one per sample the coming
+/// actuation phase plays; the default).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RefineMode {
+    None,
+    Once,
+    #[default]
+    PerSample,
+}
+
+impl RefineMode {
+    pub fn is_default(&self) -> bool {
+        *self == RefineMode::default()
+    }
 }
 
 fn default_sqp_iterations() -> usize {

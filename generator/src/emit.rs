@@ -13,7 +13,11 @@ use crate::tables::{hex, Axis, Tables};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
+mod explicit;
+
 const SOLVER_TEMPLATE: &str = include_str!("../templates/solver.rs");
+/// The explicit tier (emitted as module `explicit` beside `solver`).
+const EXPLICIT_TEMPLATE: &str = include_str!("../templates/explicit.rs");
 const LIB_TEMPLATE: &str = include_str!("../templates/lib.rs");
 
 /// Active-set iterations allowed per window QP (each iteration adds or drops
@@ -55,6 +59,9 @@ pub struct EmitInput<'a> {
     /// Path of this module's per-cell QP iteration map in
     /// `qp_iteration_map.rs` (see [`emit_qp_iteration_map`]).
     pub qp_map_ident: &'a str,
+    /// The explicit tier's data (None: no explicit tier, as for the paper
+    /// preset, which has no tables, and `three_capsules`).
+    pub explicit: Option<&'a crate::explicit::ExplicitTables>,
 }
 
 fn axis_tokens(name: &str, a: &Axis) -> Result<TokenStream, EmitError> {
@@ -246,12 +253,28 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
         .map_err(|e| EmitError::Parse(format!("solver template: {e}")))?;
     let solver_attrs = &solver_file.attrs;
     let solver_items = &solver_file.items;
+    if let (Some(e), Some(t)) = (input.explicit, input.tables) {
+        // The slots parallel the sparse index's kept cells and the fine grid.
+        debug_assert_eq!(e.index_slot.len(), t.index_cells.len());
+        debug_assert_eq!(e.coasted_index_slot.len(), t.index_cells.len());
+        debug_assert_eq!(e.fine_slot.len(), t.fine.plans.len());
+    }
+    let explicit_tables = explicit::emit_explicit_tables(input.explicit, n, nx, k, qp_max)?;
+    let explicit_file = syn::parse_file(EXPLICIT_TEMPLATE)
+        .map_err(|e| EmitError::Parse(format!("explicit template: {e}")))?;
+    let explicit_attrs = &explicit_file.attrs;
+    let explicit_items = &explicit_file.items;
     let module = quote! {
         #spec
         #tables
+        #explicit_tables
         pub mod solver {
             #(#solver_attrs)*
             #(#solver_items)*
+        }
+        pub mod explicit {
+            #(#explicit_attrs)*
+            #(#explicit_items)*
         }
     };
     let file: syn::File =

@@ -3,6 +3,7 @@
 
 use crate::config::{Config, CostUnits, Preset};
 use crate::emit::{emit_lib, emit_module, emit_qp_iteration_map, EmitError, EmitInput};
+use crate::explicit::{build_explicit, ExplicitTables};
 use crate::tables::{build_tables, config_hash, Progress, Tables};
 use std::path::{Path, PathBuf};
 
@@ -55,6 +56,9 @@ fn io_err(path: &Path, e: std::io::Error) -> GenerateError {
 pub struct GeneratedFiles {
     pub files: Vec<(PathBuf, Vec<u8>)>,
     pub tables: Tables,
+    /// The explicit tier's data emitted into the module (empty for modules
+    /// without an explicit tier: `three_capsules`).
+    pub explicit: ExplicitTables,
 }
 
 /// Where the per-cell QP iteration map goes, relative to the crate.
@@ -182,21 +186,33 @@ pub fn emit_module_files(
         tables: Some(&tables),
         config_hash: config_hash(config),
         qp_map_ident: module.qp_map_ident(),
+        // No explicit tier outside the default controller: the explicit
+        // generator addresses samples with u16 slots (at most 65 535) and
+        // the M = 3 data would be large; `refine = none` is refused there.
+        explicit: None,
     })?;
     let files = vec![
         (PathBuf::from(module.source_path()), source.into_bytes()),
         (PathBuf::from(module.tables_path()), tables.to_bytes()),
     ];
-    Ok(GeneratedFiles { files, tables })
+    Ok(GeneratedFiles {
+        files,
+        tables,
+        explicit: ExplicitTables::default(),
+    })
 }
 
 /// Emits every file from already-built tables of the default `controller`.
 pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, GenerateError> {
+    // Derived from the tables at emission (not stored in tables.bin): the
+    // linearization is cheap next to the tables and needs no format change.
+    let explicit = build_explicit(config, &tables);
     let controller = emit_module(&EmitInput {
         config,
         tables: Some(&tables),
         config_hash: config_hash(config),
         qp_map_ident: ControllerModule::Controller.qp_map_ident(),
+        explicit: Some(&explicit),
     })?;
     let paper = paper_preset(config);
     let paper_module = emit_module(&EmitInput {
@@ -204,6 +220,7 @@ pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, Gener
         tables: None,
         config_hash: config_hash(&paper),
         qp_map_ident: "PAPER_PRESET",
+        explicit: None,
     })?;
     let files = vec![
         (
@@ -222,7 +239,11 @@ pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, Gener
         ),
         (PathBuf::from("tables.bin"), tables.to_bytes()),
     ];
-    Ok(GeneratedFiles { files, tables })
+    Ok(GeneratedFiles {
+        files,
+        tables,
+        explicit,
+    })
 }
 
 /// Writes each file via a temporary file in the same directory and a rename,

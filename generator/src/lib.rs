@@ -7,6 +7,7 @@
 
 pub mod config;
 pub mod emit;
+pub mod explicit;
 pub mod generate;
 pub mod index;
 pub mod legs;

@@ -92,7 +92,7 @@ impl<'a> Ocp<'a> {
 
     /// One sample of capsule `c` from `xv` at input `u`, then the coast:
     /// the next state and the exact Jacobians of the composite map.
-    fn sample_step(&self, c: &CapsuleParams, xv: [f64; 2], u: f64) -> CapsuleStep {
+    pub(crate) fn sample_step(&self, c: &CapsuleParams, xv: [f64; 2], u: f64) -> CapsuleStep {
         let act = rk4_capsule(c, xv, u, self.dt_s, self.substeps);
         if self.coast_s <= 0.0 {
             return act;

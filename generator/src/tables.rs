@@ -190,12 +190,15 @@ pub fn config_hash(config: &Config) -> [u8; 32] {
 
 /// SHA-256 of the parts of the config that shape the emitted solver: the
 /// config with the simulation-only sections (`disturbance`, `measurement`)
-/// at their defaults and the Pulseq writer's scanner limits cleared. Two
-/// configs with the same solver hash run on the same compiled controller.
+/// at their defaults, the runtime's `controller.refine` (a setting of the
+/// runtime, not of the emitted solver) at its default and the Pulseq
+/// writer's scanner limits cleared. Two configs with the same solver hash
+/// run on the same compiled controller.
 pub fn solver_hash(config: &Config) -> [u8; 32] {
     let mut solver = config.clone();
     solver.disturbance = Default::default();
     solver.measurement = Default::default();
+    solver.controller.refine = Default::default();
     let s = &mut solver.scanner;
     s.slew_rate_t_per_m_per_s = None;
     s.gradient_raster_s = None;

@@ -6,7 +6,7 @@ use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
     PaperConstants, TightInputs,
 };
-use capsule_mpc_generated::{Leg, PlanSolver, SolveReport, SolveStatus};
+use capsule_mpc_generated::{Leg, PlanSolver, SolveReport, SolveStatus, Tier};
 
 mod braking;
 mod legs;
@@ -162,6 +162,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     pub fn default_settings() -> ControllerSettings {
         ControllerSettings {
             sampling: Sampling::Constant,
+            // The explicit answer comes first either way; refining it per
+            // played sample keeps the closed-loop results measured with
+            // the refinement (README) and costs at most N solves per cycle
+            // inside the tracking phase. `None` is for hosts that need the
+            // bounded explicit step alone.
+            refine: Refine::PerSample,
             switching: SwitchingRule::Tight,
             compensate_delay: true,
             tracking_time_s: S::TRACKING_TIME_S,
@@ -181,7 +187,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// A controller with every capsule at rest at `positions_m`.
     pub fn new(settings: ControllerSettings, positions_m: &[f64]) -> Result<Self, RuntimeError> {
         const { assert!(NX <= K2 && NX.is_multiple_of(2)) };
-        check_settings(&settings, S::N)?;
+        check_settings(&settings, S::N, S::HAS_EXPLICIT_TIER)?;
         let mut c = Controller {
             solver: S::new(),
             settings,
@@ -259,6 +265,17 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     pub fn settings(&self) -> &ControllerSettings {
         &self.settings
+    }
+
+    /// Changes when the refinement runs; allowed at any time (no state
+    /// depends on it). `Refine::None` needs explicit-tier data:
+    /// `BadSetting("refine")` for a solver without tables.
+    pub fn set_refine(&mut self, refine: Refine) -> Result<(), RuntimeError> {
+        if refine == Refine::None && !S::HAS_EXPLICIT_TIER {
+            return Err(RuntimeError::BadSetting("refine"));
+        }
+        self.settings.refine = refine;
+        Ok(())
     }
 
     /// The final target, when set.
@@ -451,11 +468,42 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// phase, long phases played barely refined plans, and variable sampling
     /// settled later than constant sampling although its predictions held
     /// to 0.3 mm. Worst case N solves per cycle, inside the tracking time.
+    ///
+    /// Two tiers: the explicit answer first (no rollout); with
+    /// `Refine::None` it is the plan (outside the index: `OutOfRange`, the
+    /// fallback). Otherwise the refinement weighs it by its true cost
+    /// against the shifted plan and the stored tail and only accepts
+    /// decreases, so the refined plan never costs more than the explicit
+    /// one. The report's `tier` names the tier that produced the plan.
     fn refine_plan(&mut self, e: &[f64; NX]) -> SolveReport {
-        let rounds = match self.settings.sampling {
-            Sampling::Variable => self.planned_phase_samples.max(1),
-            Sampling::Ideal | Sampling::Constant => 1,
+        let rounds = match (self.settings.refine, self.settings.sampling) {
+            (Refine::None, _) => 0,
+            (Refine::Once, _) => 1,
+            (Refine::PerSample, Sampling::Variable) => self.planned_phase_samples.max(1),
+            (Refine::PerSample, Sampling::Ideal | Sampling::Constant) => 1,
         };
+        let explicit = if S::HAS_EXPLICIT_TIER {
+            Some(self.solver.solve_explicit(e))
+        } else {
+            None
+        };
+        if rounds == 0 {
+            // check_settings refuses Refine::None without explicit data.
+            let report = explicit.unwrap_or(SolveReport {
+                status: SolveStatus::OutOfRange,
+                cost: f64::INFINITY,
+                took_table_plan: false,
+                qp_iterations: 0,
+                max_qp_iterations: 0,
+                tier: Tier::Explicit,
+            });
+            if report.status != SolveStatus::OutOfRange {
+                self.solver.adopt_explicit();
+            }
+            return report;
+        }
+        // The report counts the refinement's QPs only: the offline QP
+        // iteration map it is checked against measured those.
         let mut report = self.solver.solve(e);
         for _ in 1..rounds {
             if report.status == SolveStatus::OutOfRange {
@@ -463,6 +511,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
             let r = self.solver.solve(e);
             report.cost = r.cost;
+            report.tier = r.tier;
             report.took_table_plan |= r.took_table_plan;
             report.qp_iterations += r.qp_iterations;
             report.max_qp_iterations = report.max_qp_iterations.max(r.max_qp_iterations);

@@ -4,15 +4,15 @@
 
 use crate::metrics::Metrics;
 use crate::plant::{Phase, Plant};
-use crate::report::{MeasurementRecord, RunReport};
+use crate::report::{MeasurementRecord, RunReport, TierCycles};
 use anyhow::{bail, Context, Result};
-use capsule_mpc_generator::config::{Config, DisturbanceConfig};
+use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
 use capsule_mpc_generator::generate::ControllerModule;
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_generator::tables::{hex, solver_hash};
-use capsule_mpc_runtime::controller::SwitchingRule;
-use capsule_mpc_runtime::generated::PlanSolver;
-use capsule_mpc_runtime::{Controller, RuntimeStatus};
+use capsule_mpc_runtime::controller::{Refine, SwitchingRule};
+use capsule_mpc_runtime::generated::{PlanSolver, Tier};
+use capsule_mpc_runtime::{Controller, RuntimeError, RuntimeStatus};
 use std::time::Instant;
 
 /// Reference scenarios of the paper (targets in cm, see NOTES.md).
@@ -115,6 +115,9 @@ pub struct RunOptions {
     /// Terminal hold near the target (off: the MPC re-plans to the end,
     /// as the paper's controller does).
     pub hold: bool,
+    /// When the SQP refinement runs after the explicit tier (the config's
+    /// `controller.refine` by default).
+    pub refine: RefineMode,
 }
 
 impl RunOptions {
@@ -135,6 +138,7 @@ impl RunOptions {
             lose_every: None,
             preset: Preset::Default,
             hold: true,
+            refine: config.controller.refine,
         }
     }
 }
@@ -261,6 +265,7 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     settings.sampling = opts.sampling.runtime();
     settings.switching = opts.switching;
     settings.compensate_delay = opts.compensate_delay;
+    settings.refine = runtime_refine(opts.refine);
     settings.extra_delay_s = opts.extra_delay_s;
     settings.position_noise_m = opts.position_noise_m;
     settings.disturbance_bound = opts.disturbance.bound_si();
@@ -270,8 +275,13 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         settings.hold_enter_speed_m_per_s = 0.0;
     }
     let positions: Vec<f64> = x0.iter().step_by(2).copied().collect();
-    let mut ctl = Controller::<S, NX, K>::new(settings, &positions)
-        .map_err(|e| anyhow::anyhow!("controller settings: {e:?}"))?;
+    let mut ctl = Controller::<S, NX, K>::new(settings, &positions).map_err(|e| match e {
+        RuntimeError::BadSetting("refine") => anyhow::anyhow!(
+            "refine = none needs the explicit tier's data, which only the default two-capsule controller has \
+             (not the paper preset, which has no tables, nor the three-capsule module): use refine once or per-sample"
+        ),
+        e => anyhow::anyhow!("controller settings: {e:?}"),
+    })?;
     set_target_or_explain(&mut ctl, &target, "target")?;
     let retarget: Option<(f64, [f64; NX])> = match &opts.retarget {
         Some(r) => {
@@ -344,6 +354,11 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
             out
         };
         statuses.count(out.status);
+        match out.solve.map(|r| r.tier) {
+            Some(Tier::Explicit) => statuses.explicit += 1,
+            Some(Tier::Refined) => statuses.refined += 1,
+            None => {}
+        }
         for &u in &out.gradients_t_per_m[..out.actuation_samples] {
             if plant.time_s() >= opts.duration_s - 1e-9 {
                 break;
@@ -377,6 +392,10 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     report.sampling = Some(opts.sampling.name().to_string());
     report.seed = Some(opts.seed);
     report.fallback_cycles = Some(statuses.fallback);
+    report.tier_cycles = Some(TierCycles {
+        explicit: statuses.explicit,
+        refined: statuses.refined,
+    });
     Ok(report)
 }
 
@@ -435,6 +454,18 @@ fn explain<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
 #[derive(Debug, Default)]
 struct StatusCounts {
     fallback: usize,
+    /// Cycles whose plan came from each tier.
+    explicit: usize,
+    refined: usize,
+}
+
+/// The runtime's refinement setting for the config's.
+pub fn runtime_refine(r: RefineMode) -> Refine {
+    match r {
+        RefineMode::None => Refine::None,
+        RefineMode::Once => Refine::Once,
+        RefineMode::PerSample => Refine::PerSample,
+    }
 }
 
 impl StatusCounts {

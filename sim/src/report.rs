@@ -79,6 +79,17 @@ pub struct RunReport {
     /// Cycles in which the controller applied its fallback braking law.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fallback_cycles: Option<usize>,
+    /// Cycles whose plan each solver tier produced.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tier_cycles: Option<TierCycles>,
+}
+
+/// Cycles per solver tier (`explicit`: the explicit tier's plan was played;
+/// `refined`: the SQP refinement found a cheaper one).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TierCycles {
+    pub explicit: usize,
+    pub refined: usize,
 }
 
 impl RunReport {
@@ -103,6 +114,7 @@ impl RunReport {
             scenario: None,
             sampling: None,
             fallback_cycles: None,
+            tier_cycles: None,
             disturbance: None,
             seed: None,
             d: None,

@@ -4,6 +4,7 @@
 use crate::bench::peers::run_peers;
 use crate::bench::reference::RefProblem;
 use crate::bench::states::BenchState;
+use crate::bench::tiers::measure_tiers;
 use crate::bench::timing::{fmt_us, pin_to_one_core, timed, timer_overhead_ns, Percentiles};
 use anyhow::Result;
 use capsule_mpc_runtime::controller::Sampling as RtSampling;
@@ -239,6 +240,7 @@ pub fn measure(
     }
 
     let peers = run_peers(states, problem, peer_count);
+    let tiers = measure_tiers(states, peer_count.max(1000));
 
     Ok(json!({
         "step_ns": step_warm.json(),
@@ -266,6 +268,7 @@ pub fn measure(
         },
         "worst_states": worst,
         "peers": peers,
+        "tiers": tiers,
         "allocations_per_step": 0,
         "allocations_source": "tests/alloc_free.rs (counting global allocator over set_target, cycle_full_state and cycle along closed-loop runs)",
         "workspace_bytes": std::mem::size_of::<DefaultController>(),

@@ -68,4 +68,5 @@ pub mod osqp_peer;
 pub mod peers;
 pub mod reference;
 pub mod states;
+pub mod tiers;
 pub mod timing;

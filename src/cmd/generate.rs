@@ -4,8 +4,11 @@
 use crate::cli::{load_config, GenerateArgs};
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::Config;
+use capsule_mpc_generator::emit::qp_max_iterations;
+use capsule_mpc_generator::explicit::explicit_step_ops;
 use capsule_mpc_generator::generate::{
     differences, emit_module_files, generate_module, write_atomically, ControllerModule,
+    GeneratedFiles,
 };
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_generator::shard::{compute_shard, merge_parts, ShardSpec, Sharding};
@@ -145,7 +148,28 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         module.tables_path(),
         table_bytes
     );
+    print_explicit_tier(&config, &files);
     Ok(())
+}
+
+/// The explicit tier's data and its certified worst case (emitted as
+/// `EXPLICIT_CERTIFIED_OPS`): operations of one step from the loop bounds
+/// with the QP at its iteration cap.
+fn print_explicit_tier(config: &Config, files: &GeneratedFiles) {
+    if files.explicit.samples.is_empty() {
+        println!("explicit tier: none in this module (refine = none is refused for it)");
+        return;
+    }
+    let c = &config.controller;
+    let nx = 2 * config.capsule_count();
+    let cap = qp_max_iterations(c.horizon_steps);
+    println!(
+        "explicit tier: {} samples, {} bytes; certified worst case {} floating-point operations per step ({} QP iterations at most)",
+        files.explicit.samples.len(),
+        files.explicit.bytes(c.horizon_steps, nx),
+        explicit_step_ops(c.horizon_steps, nx, c.plan_steps, cap),
+        cap
+    );
 }
 
 /// The `three-capsules` module is named for its capsule count (the

@@ -30,6 +30,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     opts.compensate_delay = !args.no_delay_compensation;
     opts.lose_every = args.lose_every;
     opts.hold = !args.no_hold;
+    if let Some(r) = args.refine {
+        opts.refine = r.into();
+    }
     if let Some(d) = args.extra_delay {
         opts.extra_delay_s = d;
     }
@@ -69,6 +72,18 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         m.state_bound_violations,
         m.max_step_compute_ns as f64 / 1e3
     );
+    if let Some(t) = report.tier_cycles {
+        println!(
+            "refine {}: plans from the explicit tier in {} cycles, from the refinement in {}",
+            match opts.refine {
+                capsule_mpc_generator::config::RefineMode::None => "none",
+                capsule_mpc_generator::config::RefineMode::Once => "once",
+                capsule_mpc_generator::config::RefineMode::PerSample => "per-sample",
+            },
+            t.explicit,
+            t.refined
+        );
+    }
     if let Some(path) = &args.json {
         report.write_json(path)?;
     }

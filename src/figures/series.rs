@@ -219,6 +219,7 @@ mod tests {
             seed: None,
             d: None,
             fallback_cycles: None,
+            tier_cycles: None,
         }
     }
 }

@@ -25,10 +25,28 @@ pub enum SwitchingRule {
     Tight,
 }
 
+/// When the SQP refinement runs after the explicit tier (see
+/// `Controller::refine_plan`). The explicit answer is always computed
+/// first; a refined plan replaces it only when its true (rolled-out) cost
+/// is lower.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Refine {
+    /// The explicit tier alone: no model rollout in the solver.
+    None,
+    /// One refinement (SQP_ITERATIONS Gauss-Newton steps) per cycle.
+    Once,
+    /// One refinement per sample the coming actuation phase plays
+    /// (variable sampling: up to N; ideal and constant sampling: one).
+    PerSample,
+}
+
 /// Settings; defaults come from the generated spec.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ControllerSettings {
     pub sampling: Sampling,
+    /// Refinement after the explicit tier (default `PerSample`: see
+    /// `Controller::default_settings`).
+    pub refine: Refine,
     pub switching: SwitchingRule,
     /// Predict the state through tracking + delay before solving (true), or
     /// solve from the measured state and treat the delay as a disturbance
@@ -187,7 +205,8 @@ pub const MIN_ACCEL_PSD: f64 = 1.0e-6;
 
 /// Every name `RuntimeError::BadSetting` can carry (the settings that are
 /// range-checked), for hosts and tests that map errors back to fields.
-pub const SETTING_NAMES: [&str; 10] = [
+pub const SETTING_NAMES: [&str; 11] = [
+    "refine",
     "tracking_time_s",
     "extra_delay_s",
     "position_noise_m",
@@ -200,7 +219,16 @@ pub const SETTING_NAMES: [&str; 10] = [
     "reacquire_after_rejections",
 ];
 
-pub(super) fn check_settings(s: &ControllerSettings, n: usize) -> Result<(), RuntimeError> {
+/// `has_explicit_tier`: whether the solver has explicit-tier data (a
+/// controller without tables, the paper preset, has none and must refine).
+pub(super) fn check_settings(
+    s: &ControllerSettings,
+    n: usize,
+    has_explicit_tier: bool,
+) -> Result<(), RuntimeError> {
+    if s.refine == Refine::None && !has_explicit_tier {
+        return Err(RuntimeError::BadSetting("refine"));
+    }
     let finite_nonneg = |v: f64| v.is_finite() && v >= 0.0;
     if !finite_nonneg(s.tracking_time_s) || s.tracking_time_s > 1.0 {
         return Err(RuntimeError::BadSetting("tracking_time_s"));

@@ -1,0 +1,199 @@
+//! The two solver tiers timed separately on the benchmark states, the
+//! explicit tier's QP against the peers on the same QP data, and its
+//! measured QP iterations against the certified operation bound.
+//!
+//! Per state `e`: a first explicit step from `e` (untimed) whose plan is
+//! adopted and applied for one sample, then, from the predicted next state
+//! `e1`, the timed calls the closed loop makes: **explicit** =
+//! `Solver::solve_explicit(e1)` (look-up, deviation, gradient, warm-started
+//! box QP, clamp); **refined** = the same explicit step followed by the
+//! refinement `Solver::solve(e1)` (the SQP weighing the explicit plan by
+//! its true cost), i.e. what a cycle with `refine = once` costs in the
+//! solver. Min of `REPEATS` passes per state, one pinned thread.
+
+use crate::bench::clarabel_peer::ClarabelEngine;
+#[cfg(feature = "peers-osqp")]
+use crate::bench::osqp_peer::OsqpEngine;
+use crate::bench::reference::{DenseQp, QpEngine};
+use crate::bench::states::BenchState;
+use crate::bench::timing::{fmt_us, timed, Percentiles};
+use capsule_mpc_generator::explicit::explicit_step_ops;
+use capsule_mpc_runtime::generated::controller::{explicit, explicit_tables, solver, spec};
+use capsule_mpc_runtime::generated::SolveStatus;
+use serde_json::{json, Value};
+use spec::{K, N, NX};
+use std::hint::black_box;
+
+/// Passes over the states; the per-state minimum is reported.
+pub const REPEATS: usize = 3;
+
+/// The state after one explicit sample from `e`, and the solver that
+/// played it (its last slot set as in the closed loop); None out of range.
+fn after_one_explicit_sample(e: &[f64; NX]) -> Option<(solver::Solver, [f64; NX])> {
+    let mut s = solver::Solver::new();
+    if s.solve_explicit(e).status == SolveStatus::OutOfRange {
+        return None;
+    }
+    s.adopt_explicit();
+    let e1 = solver::predict(e, s.plan(), 1);
+    s.shift(1);
+    Some((s, e1))
+}
+
+/// Times both tiers; returns the `tiers` JSON and prints the table.
+pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
+    let starts: Vec<(solver::Solver, [f64; NX])> = states
+        .iter()
+        .filter_map(|s| after_one_explicit_sample(&s.e))
+        .collect();
+    let mut explicit_ns = vec![u64::MAX; starts.len()];
+    let mut refined_ns = vec![u64::MAX; starts.len()];
+    let mut iterations = vec![0u32; starts.len()];
+    for _ in 0..REPEATS {
+        for (i, (proto, e1)) in starts.iter().enumerate() {
+            let mut s = proto.clone();
+            let (r, t) = timed(|| black_box(&mut s).solve_explicit(black_box(e1)));
+            explicit_ns[i] = explicit_ns[i].min(t);
+            iterations[i] = r.max_qp_iterations;
+            let mut s = proto.clone();
+            let (_, t) = timed(|| {
+                let s = black_box(&mut s);
+                s.solve_explicit(black_box(e1));
+                s.solve(black_box(e1))
+            });
+            refined_ns[i] = refined_ns[i].min(t);
+        }
+    }
+    let ex = Percentiles::of(&explicit_ns);
+    let re = Percentiles::of(&refined_ns);
+    let max_iterations = iterations.iter().copied().max().unwrap_or(0);
+    let mut histogram = std::collections::BTreeMap::<u32, u64>::new();
+    for &it in &iterations {
+        *histogram.entry(it).or_default() += 1;
+    }
+    let measured_max_ops = explicit_step_ops(N, NX, K, max_iterations as usize);
+    let certified = explicit_tables::EXPLICIT_CERTIFIED_OPS;
+    println!(
+        "tiers ({} states in range, min of {REPEATS}): {:<10} {:>9} {:>9} {:>9}",
+        starts.len(),
+        "",
+        "median",
+        "p99",
+        "max"
+    );
+    for (name, p) in [("explicit", ex), ("refined", re)] {
+        println!(
+            "  {name:<40} {:>9} {:>9} {:>9}",
+            fmt_us(p.median),
+            fmt_us(p.p99),
+            fmt_us(p.max)
+        );
+    }
+    println!(
+        "explicit QP iterations: max {max_iterations} (cap {}), histogram {histogram:?}; operations at that count {measured_max_ops}, certified bound {certified}",
+        spec::QP_MAX_ITERATIONS
+    );
+    let peers = explicit_qp_peers(&starts, peer_count);
+    json!({
+        "explicit": {
+            "median_ns": ex.median, "p99_ns": ex.p99, "max_ns": ex.max,
+            "max_qp_iterations": max_iterations,
+            "qp_iteration_histogram": histogram.iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
+            "ops_at_max_iterations": measured_max_ops,
+            "certified_ops": certified,
+            "what": "Solver::solve_explicit from the state one explicit sample later (look-up, deviation, gradient, warm-started box QP, clamp)",
+        },
+        "refined": {
+            "median_ns": re.median, "p99_ns": re.p99, "max_ns": re.max,
+            "what": "the explicit step followed by the SQP refinement Solver::solve (refine = once)",
+        },
+        "states": starts.len(),
+        "repeats": REPEATS,
+        "explicit_table_bytes": explicit_tables::EXPLICIT_TABLE_BYTES,
+        "peers_on_explicit_qp": peers,
+    })
+}
+
+/// The explicit tier's box QP (the same H, gradient and box it solves)
+/// through clarabel (and OSQP with `peers-osqp`), timed against the
+/// generated active-set QP warm-started from the stored active set; the
+/// ratio is peer / ours at the median, with the largest input difference.
+fn explicit_qp_peers(starts: &[(solver::Solver, [f64; NX])], peer_count: usize) -> Value {
+    let count = peer_count.min(starts.len());
+    let stride = (starts.len() / count.max(1)).max(1);
+    let mut cases: Vec<(DenseQp, usize)> = Vec::new();
+    let mut qp = solver::BoxQp::new();
+    let mut plan = [0.0; K];
+    for (_, e1) in starts.iter().step_by(stride).take(count) {
+        let Some(slot) = explicit::explicit_slot(e1, false, usize::MAX) else {
+            continue;
+        };
+        if explicit::explicit_plan(e1, false, usize::MAX, &mut qp, &mut plan).is_none() {
+            continue;
+        }
+        cases.push((
+            DenseQp {
+                h: qp.h,
+                g: qp.g,
+                lo: qp.lo,
+                hi: qp.hi,
+            },
+            slot,
+        ));
+    }
+    let mut ours_ns = Vec::new();
+    let mut ours_x = Vec::new();
+    for (case, slot) in &cases {
+        let mut best = u64::MAX;
+        let mut x = [0.0; N];
+        for _ in 0..REPEATS {
+            let mut q = solver::BoxQp::new();
+            q.h = case.h;
+            q.g = case.g;
+            q.lo = case.lo;
+            q.hi = case.hi;
+            let active = explicit_tables::EXPLICIT[*slot].active;
+            let (_, t) = timed(|| black_box(&mut q).solve_from(black_box(&active)));
+            best = best.min(t);
+            x = q.x;
+        }
+        ours_ns.push(best);
+        ours_x.push(x);
+    }
+    let ours = Percentiles::of(&ours_ns);
+    let engines: Vec<Box<dyn QpEngine>> = vec![
+        Box::new(ClarabelEngine),
+        #[cfg(feature = "peers-osqp")]
+        Box::new(OsqpEngine::default()),
+    ];
+    let mut out = serde_json::Map::new();
+    out.insert(
+        "explicit_qp_ns".into(),
+        json!({"median": ours.median, "p99": ours.p99, "max": ours.max, "qps": cases.len()}),
+    );
+    for mut engine in engines {
+        let mut ns = Vec::new();
+        let mut max_dx: f64 = 0.0;
+        for ((case, _), x_ours) in cases.iter().zip(&ours_x) {
+            let mut x = [0.0; N];
+            let (_, t) = timed(|| engine.solve(case, &mut x));
+            ns.push(t);
+            for j in 0..N {
+                max_dx = max_dx.max((x[j] - x_ours[j]).abs());
+            }
+        }
+        let p = Percentiles::of(&ns);
+        let ratio = p.median as f64 / ours.median.max(1) as f64;
+        println!(
+            "  explicit QP: ours {} median, {} {} median ({ratio:.1}x), largest input difference {max_dx:.1e} T/m",
+            fmt_us(ours.median),
+            engine.name(),
+            fmt_us(p.median)
+        );
+        out.insert(
+            engine.name().into(),
+            json!({"median_ns": p.median, "max_ns": p.max, "ratio_to_ours": ratio, "max_abs_du_t_per_m": max_dx}),
+        );
+    }
+    Value::Object(out)
+}
