@@ -74,20 +74,27 @@ fn counter_sees_allocations() {
     drop(v);
 }
 
+/// Scenario's target and the states of its ideal closed-loop run (simulated
+/// with the counter off).
+fn trajectory(config: &Config, scenario: Scenario) -> ([f64; spec::NX], Vec<[f64; spec::NX]>) {
+    let target_v = scenario.target_state();
+    let target: [f64; spec::NX] = target_v.as_slice().try_into().unwrap();
+    let opts = RunOptions::new(config, target_v, Sampling::Ideal);
+    let report = run(config, &opts).expect("closed-loop run");
+    let rows = report
+        .x
+        .iter()
+        .map(|x| x.as_slice().try_into().unwrap())
+        .collect();
+    (target, rows)
+}
+
 #[test]
 fn controller_cycles_do_not_allocate() {
     let config = Config::embedded_default();
     let mut total_calls = 0usize;
     for scenario in [Scenario::A, Scenario::C] {
-        let target_v = scenario.target_state();
-        let target: [f64; spec::NX] = target_v.as_slice().try_into().unwrap();
-        let opts = RunOptions::new(&config, target_v.clone(), Sampling::Ideal);
-        let report = run(&config, &opts).expect("closed-loop run");
-        let rows: Vec<[f64; spec::NX]> = report
-            .x
-            .iter()
-            .map(|x| x.as_slice().try_into().unwrap())
-            .collect();
+        let (target, rows) = trajectory(&config, scenario);
         assert!(rows.len() > 50);
 
         // Ideal sampling: set_target + cycle_full_state along the trajectory.
@@ -167,15 +174,7 @@ fn controller_cycles_do_not_allocate() {
 fn both_tiers_do_not_allocate() {
     let config = Config::embedded_default();
     for scenario in [Scenario::A, Scenario::C] {
-        let target_v = scenario.target_state();
-        let target: [f64; spec::NX] = target_v.as_slice().try_into().unwrap();
-        let opts = RunOptions::new(&config, target_v.clone(), Sampling::Ideal);
-        let report = run(&config, &opts).expect("closed-loop run");
-        let rows: Vec<[f64; spec::NX]> = report
-            .x
-            .iter()
-            .map(|x| x.as_slice().try_into().unwrap())
-            .collect();
+        let (target, rows) = trajectory(&config, scenario);
         let mut explicit_cycles = 0;
         for refine in [Refine::None, Refine::Once, Refine::PerSample] {
             for sampling in [

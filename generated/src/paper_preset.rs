@@ -1017,10 +1017,10 @@ pub mod solver {
     }
     /// Speed below which a state counts as at rest for the fine plans, m/s.
     pub const FINE_REST_SPEED_M_PER_S: f64 = 5.0e-3;
-    /// Fills `out` with the fine plan from rest nearest relative state `e`
-    /// (every speed below `FINE_REST_SPEED_M_PER_S`, every position on the fine
-    /// grid); None otherwise.
-    pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
+    /// The fine grid point nearest relative state `e` when every speed is
+    /// below `FINE_REST_SPEED_M_PER_S` and every position on the fine grid;
+    /// None otherwise.
+    pub fn fine_cell(e: &[f64; NX]) -> Option<usize> {
         if FINE_COUNT == 0 {
             return None;
         }
@@ -1033,7 +1033,16 @@ pub mod solver {
             flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, e[2 * i])?;
             i += 1;
         }
-        if flat >= FINE_COUNT || !FINE_REACHED[flat] {
+        if flat >= FINE_COUNT {
+            return None;
+        }
+        Some(flat)
+    }
+    /// Fills `out` with the fine plan from rest nearest relative state `e`
+    /// (see `fine_cell`); None off the fine grid or where it has no plan.
+    pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
+        let flat = fine_cell(e)?;
+        if !FINE_REACHED[flat] {
             return None;
         }
         *out = if coasted { COASTED_FINE_PLAN_U[flat] } else { FINE_PLAN_U[flat] };
@@ -1481,9 +1490,7 @@ pub mod explicit {
     //! constant bound, and the QP stops at `QP_MAX_ITERATIONS`, so the
     //! operation count is bounded by `EXPLICIT_CERTIFIED_OPS`.
     use super::explicit_tables::*;
-    use super::solver::{
-        axis_nearest, clamp_u, index_lower_bound, BoxQp, FINE_REST_SPEED_M_PER_S,
-    };
+    use super::solver::{axis_nearest, clamp_u, fine_cell, index_lower_bound, BoxQp};
     use super::spec::*;
     use super::tables::*;
     /// What one explicit step produced besides the plan.
@@ -1593,18 +1600,7 @@ pub mod explicit {
         }
     }
     fn fine_slot(e: &[f64; NX], coasted: bool) -> Option<usize> {
-        if FINE_COUNT == 0 {
-            return None;
-        }
-        let mut flat = 0usize;
-        let mut i = 0;
-        while i < M {
-            if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S) {
-                return None;
-            }
-            flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, e[2 * i])?;
-            i += 1;
-        }
+        let flat = fine_cell(e)?;
         let slots = if coasted {
             &COASTED_FINE_EXPLICIT_SLOT
         } else {

@@ -13,7 +13,7 @@
 //! operation count is bounded by `EXPLICIT_CERTIFIED_OPS`.
 
 use super::explicit_tables::*;
-use super::solver::{axis_nearest, clamp_u, index_lower_bound, BoxQp, FINE_REST_SPEED_M_PER_S};
+use super::solver::{axis_nearest, clamp_u, fine_cell, index_lower_bound, BoxQp};
 use super::spec::*;
 use super::tables::*;
 
@@ -137,18 +137,7 @@ fn consider(e: &[f64; NX], slot: usize, best: &mut usize, best_distance: &mut f6
 }
 
 fn fine_slot(e: &[f64; NX], coasted: bool) -> Option<usize> {
-    if FINE_COUNT == 0 {
-        return None;
-    }
-    let mut flat = 0usize;
-    let mut i = 0;
-    while i < M {
-        if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S) {
-            return None;
-        }
-        flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, e[2 * i])?;
-        i += 1;
-    }
+    let flat = fine_cell(e)?;
     let slots = if coasted {
         &COASTED_FINE_EXPLICIT_SLOT
     } else {

@@ -845,10 +845,10 @@ pub fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
 /// Speed below which a state counts as at rest for the fine plans, m/s.
 pub const FINE_REST_SPEED_M_PER_S: f64 = 5.0e-3;
 
-/// Fills `out` with the fine plan from rest nearest relative state `e`
-/// (every speed below `FINE_REST_SPEED_M_PER_S`, every position on the fine
-/// grid); None otherwise.
-pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
+/// The fine grid point nearest relative state `e` when every speed is
+/// below `FINE_REST_SPEED_M_PER_S` and every position on the fine grid;
+/// None otherwise.
+pub fn fine_cell(e: &[f64; NX]) -> Option<usize> {
     if FINE_COUNT == 0 {
         return None;
     }
@@ -861,7 +861,17 @@ pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<(
         flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, e[2 * i])?;
         i += 1;
     }
-    if flat >= FINE_COUNT || !FINE_REACHED[flat] {
+    if flat >= FINE_COUNT {
+        return None;
+    }
+    Some(flat)
+}
+
+/// Fills `out` with the fine plan from rest nearest relative state `e`
+/// (see `fine_cell`); None off the fine grid or where it has no plan.
+pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
+    let flat = fine_cell(e)?;
+    if !FINE_REACHED[flat] {
         return None;
     }
     *out = if coasted {
