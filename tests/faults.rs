@@ -408,9 +408,13 @@ const ITERATION_LIMIT_STATES: [[u64; NX]; 3] = [
 /// The first state on which a fresh `cycle_full_state` (target 0, so the
 /// state is the relative state) reports IterationLimit.
 fn iteration_limit_state(proto: &DefaultController) -> Option<[f64; NX]> {
+    // Inside a kept index cell too, so that a fresh solver starting from the
+    // stored tail hits the bound as well (the controller's explicit tier
+    // also starts from samples of neighbouring cells).
     let hits = |e: &[f64; NX]| {
         let mut c = proto.clone();
         c.cycle_full_state(e).unwrap().status == RuntimeStatus::IterationLimit
+            && Solver::new().solve(e).status == SolveStatus::IterationLimit
     };
     let known = ITERATION_LIMIT_STATES
         .iter()
@@ -483,8 +487,8 @@ fn solve_above_the_offline_iteration_map_is_flagged() {
 }
 
 /// A QP that hits its iteration bound is flagged IterationLimit through the
-/// controller, and the plan played is the solver's best feasible plan:
-/// finite, within u_max, no worse than the stored plan it started from.
+/// controller, and the plan played is finite, within u_max, no worse than
+/// the solver's best feasible plan nor the stored plan it started from.
 #[test]
 fn iteration_limit_is_flagged_with_a_finite_bounded_plan() {
     let mut proto = DefaultController::new(settings(Sampling::Ideal), &[0.0; M]).unwrap();
@@ -504,11 +508,18 @@ fn iteration_limit_is_flagged_with_a_finite_bounded_plan() {
     );
     assert!(report.cost.is_finite());
 
-    // The plan played is exactly the solver's (best feasible) plan...
+    // The plan played is the cheaper of the two tiers' (issue 15): no worse
+    // than the best feasible plan a fresh solver refines from the stored
+    // tail...
     let mut s = Solver::new();
     let direct = s.solve(&e);
     assert_eq!(direct.status, SolveStatus::IterationLimit);
-    assert_eq!(&out.gradients_t_per_m, s.plan());
+    let played_cost = solver::rollout_cost(&e, &out.gradients_t_per_m, &Schedule::BACK_TO_BACK);
+    assert!(
+        played_cost <= direct.cost * (1.0 + 1e-12),
+        "played {played_cost} > refined {}",
+        direct.cost
+    );
     assert!(out.gradients_t_per_m.iter().any(|&u| u != 0.0));
     // ... and it is no worse than the stored plan the solve started from.
     let mut table = [0.0; K];
