@@ -345,7 +345,7 @@ pub struct GenerateArgs {
 #[derive(Debug, Clone, Args)]
 pub struct BenchArgs {
     /// Number of states to solve from (closed-loop states of scenarios A
-    /// and C, the rest uniform over the admissible region).
+    /// and C, the rest uniform over the admissible region's kept index cells).
     #[arg(long, default_value_t = 100000)]
     pub states: usize,
     /// How many of those states (evenly spread) the peers solve too.

@@ -29,7 +29,9 @@
 //! The states visited by closed-loop runs of scenarios A and C (ideal
 //! sampling, 3 s, one row per 20 ms sample), plus states drawn uniformly over
 //! the admissible region: each relative position over the warm-start index
-//! range (`tables::INDEX_POSITION_AXIS`), each speed in +-0.3 m/s.
+//! range (`tables::INDEX_POSITION_AXIS`), each speed in +-0.3 m/s, kept when
+//! they fall in a kept cell of the sparse warm-start index (the others
+//! have no stored plan: the runtime's fallback handles them, not the solver).
 //!
 //! # Peers
 //!
