@@ -31,26 +31,12 @@ pub fn emit_explicit_tables(
             let state = floats("explicit state", &s.state)?;
             let hessian = floats("explicit hessian", &s.hessian)?;
             let gradient = floats("explicit gradient", &s.gradient)?;
-            let sensitivity = s
-                .sensitivity
-                .chunks(nx)
-                .map(|row| {
-                    let r = floats("explicit sensitivity", row)?;
-                    Ok(quote! { [#(#r),*] })
-                })
-                .collect::<Result<Vec<_>, EmitError>>()?;
+            let sensitivity = matrix_rows("explicit sensitivity", &s.sensitivity, nx)?;
             let active = s.active.iter().map(|&a| Literal::i8_unsuffixed(a));
             let next = s.next;
             let cost = float("explicit cost", s.cost)?;
             let cost_gradient = floats("explicit cost gradient", &s.cost_gradient)?;
-            let cost_hessian = s
-                .cost_hessian
-                .chunks(nx)
-                .map(|row| {
-                    let r = floats("explicit cost hessian", row)?;
-                    Ok(quote! { [#(#r),*] })
-                })
-                .collect::<Result<Vec<_>, EmitError>>()?;
+            let cost_hessian = matrix_rows("explicit cost hessian", &s.cost_hessian, nx)?;
             Ok(quote! {
                 ExplicitSample {
                     source: #source, plan: #plan, offset: #offset,
@@ -136,4 +122,14 @@ pub fn emit_explicit_tables(
             pub const EXPLICIT_CERTIFIED_OPS: u64 = #ops;
         }
     })
+}
+
+/// A row-major matrix with `cols` columns as nested array literals.
+fn matrix_rows(name: &str, flat: &[f64], cols: usize) -> Result<Vec<TokenStream>, EmitError> {
+    flat.chunks(cols)
+        .map(|row| {
+            let r = floats(name, row)?;
+            Ok(quote! { [#(#r),*] })
+        })
+        .collect()
 }
