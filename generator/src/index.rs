@@ -47,11 +47,6 @@ impl IndexGrid<'_> {
         }
     }
 
-    /// Number of cells of the dense grid (what a dense index would store).
-    pub fn dense_cells(&self) -> u128 {
-        self.dims().iter().map(|&n| n as u128).product()
-    }
-
     /// Centre of cell `flat`.
     pub fn centre(&self, flat: u64) -> Vec<f64> {
         unflatten(flat as usize, &self.dims())
@@ -252,7 +247,6 @@ mod tests {
             grid.neighbourhood(&[1, 1], 1),
             vec![0, 1, 2, 3, 4, 5, 6, 7, 8]
         );
-        assert_eq!(grid.dense_cells(), 9);
         assert_eq!(grid.centre(5), vec![0.0, 0.1]);
     }
 }
