@@ -58,11 +58,13 @@ fn every_target_of_the_4_cm_grid_settles_near_its_minimum_time() {
     );
     assert!(median <= 1.25, "median ratio {median}");
     // Issue 13 asks for <= 1.6; measured 1.65 at (0, +-1) cm, the shortest
-    // moves (bound 0.16 s), where 0.1 s of closed-loop correction weighs
-    // most; since issue 15 (the explicit plan kept where its quadratic
-    // cost is lower) 1.88 at (-2, -3) cm. Asserted at the measured value
-    // so that a further regression shows.
-    assert!(worst <= 1.89, "worst ratio {worst}: {s:?}");
+    // moves (bound 0.16 s), where the last 20 ms sample overshoots to
+    // 20 mm/s and the quadratic cost lets it coast in (0.1 s). Asserted at
+    // the measured value so that a regression shows. (With the hold entered
+    // only when every capsule was within 0.7 mm of its own target, it was
+    // 1.88 at (-2, -3) cm: an arrival at (+0.98, -0.56) mm went back to the
+    // tables for a 0.4 s swing; the centred hold keeps it.)
+    assert!(worst <= 1.66, "worst ratio {worst}: {s:?}");
     // Every bound is a real time: positive and finite.
     for p in &points {
         let b = p.min_time_bound_s.unwrap();
@@ -205,10 +207,21 @@ fn a_target_changed_mid_run_is_reached_from_the_moving_state() {
                 .step_by(2)
                 .fold(0.0_f64, |a, v| a.max(v.abs()));
             assert!(speed > 0.02, "not moving at the retarget: {speed} m/s");
+            // Arrival held 1 s, then station keeping: the capsules' relative
+            // drift (a few tenths of a mm/s left at arrival) takes them out
+            // of the band every several seconds for one differential swing
+            // (README, Known limits), so a 10 s run can end mid-swing;
+            // asserted is the arrival and 80 % of the time in the band
+            // after it.
+            let arrived = m
+                .settle_held_s
+                .unwrap_or_else(|| panic!("{first:?} -> {second:?} {sampling:?}: {m:?}"));
             assert!(
-                m.settle_time_s.is_some(),
+                arrived <= 3.0,
                 "{first:?} -> {second:?} {sampling:?}: {m:?}"
             );
+            let kept = m.time_in_band_after_entry.unwrap_or(0.0);
+            assert!(kept >= 0.8, "{first:?} -> {second:?} {sampling:?}: {m:?}");
             assert_eq!(report.target, second.to_vec());
         }
     }

@@ -523,17 +523,29 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     /// Enters or leaves the terminal hold (with hysteresis); true inside.
+    ///
+    /// The hold is the local controller of a dual-mode MPC, so its region
+    /// is where that law works: the capsules nearly at rest, their spread
+    /// about the group's centre (drift included) within the position
+    /// tolerance, and the centre itself within a few millimetres, which the
+    /// hold law corrects at a few mm/s. Requiring every capsule within the
+    /// tolerance of its own target instead refused arrivals such as
+    /// (+0.98, -0.56) mm, which the hold centres to +-0.77 mm, and sent them
+    /// back to the tables for a 0.4 s differential swing out of the band.
     fn update_hold(&mut self, e: &[f64; NX]) -> bool {
         let s = &self.settings;
-        let within = |pos_m: f64, speed: f64| {
-            (0..NX / 2).all(|i| libm::fabs(e[2 * i]) <= pos_m && libm::fabs(e[2 * i + 1]) <= speed)
-        };
+        let slow = |speed: f64| (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= speed);
+        let centre_m = libm::fabs(capsule_centre_m(e));
         let was = self.holding;
         self.holding = if was {
-            within(s.hold_release_position_m, s.hold_release_speed_m_per_s)
+            slow(s.hold_release_speed_m_per_s)
+                && half_spread_m(e, 0.0) <= s.hold_release_position_m
+                && centre_m <= HOLD_CENTRE_RELEASE_M
         } else {
-            within(s.hold_enter_position_m, s.hold_enter_speed_m_per_s)
-                && relative_drift_within(e, s.hold_enter_position_m)
+            slow(s.hold_enter_speed_m_per_s)
+                && half_spread_m(e, 0.0) <= s.hold_release_position_m
+                && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
+                && centre_m <= HOLD_CENTRE_ENTER_M
         };
         if was && !self.holding {
             // Re-plan from the tables, not from the plan before the hold.
@@ -544,11 +556,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.holding
     }
 
-    /// The hold law: critically damped PD on the capsules' mean error (the
-    /// one mode a single gradient controls near rest), scaled by the duty
-    /// of the schedule and bounded by a fraction of u_max.
+    /// The hold law: critically damped PD on the group's centre (position)
+    /// and mean speed (the one mode a single gradient controls near rest),
+    /// scaled by the duty of the schedule and bounded by a fraction of
+    /// u_max.
     fn hold_gradient(&self, e: &[f64; NX]) -> f64 {
-        let (mean_x, mean_v) = capsule_means(e);
+        let (_, mean_v) = capsule_means(e);
+        let mean_x = capsule_centre_m(e);
         let mean_g = self.mean_gain;
         if mean_g.is_nan() || mean_g <= 0.0 {
             return 0.0;

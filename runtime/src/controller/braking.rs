@@ -82,17 +82,33 @@ pub(super) fn capsule_gain_and_drag<S: PlanSolver<NX, K>, const NX: usize, const
     (gain, drag.max(0.0))
 }
 
-/// Near rest one gradient moves every capsule alike: the motion relative to
-/// the capsules' mean is beyond the hold law. True when that relative
-/// motion, extrapolated over [`HOLD_DRIFT_HORIZON_S`], keeps every capsule
-/// within `position_m` of the mean-corrected target.
-pub(super) fn relative_drift_within<const NX: usize>(e: &[f64; NX], position_m: f64) -> bool {
-    let (mean_x, mean_v) = capsule_means(e);
-    (0..NX / 2).all(|i| {
-        let d = e[2 * i] - mean_x;
-        let w = e[2 * i + 1] - mean_v;
-        libm::fabs(d + w * HOLD_DRIFT_HORIZON_S) <= position_m
-    })
+/// Near rest one gradient moves every capsule alike: it sets where the
+/// group stands (its centre, the midpoint of the extreme position errors)
+/// but not how the capsules stand relative to each other. Half the spread
+/// of the position errors about that centre, with each capsule's motion
+/// relative to the mean extrapolated over `horizon_s`, m: what no hold
+/// gradient can shrink.
+pub(super) fn half_spread_m<const NX: usize>(e: &[f64; NX], horizon_s: f64) -> f64 {
+    let (_, mean_v) = capsule_means(e);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for i in 0..NX / 2 {
+        let q = e[2 * i] + (e[2 * i + 1] - mean_v) * horizon_s;
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    0.5 * (hi - lo)
+}
+
+/// The group's centre: the midpoint of the smallest and the largest
+/// position error, m. Bringing it to zero leaves every capsule within the
+/// half spread of its target, the best one gradient can do near rest.
+pub(super) fn capsule_centre_m<const NX: usize>(e: &[f64; NX]) -> f64 {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for i in 0..NX / 2 {
+        lo = lo.min(e[2 * i]);
+        hi = hi.max(e[2 * i]);
+    }
+    0.5 * (hi + lo)
 }
 
 /// Mean position and mean speed over the capsules of `[x1, v1, x2, v2, ...]`.

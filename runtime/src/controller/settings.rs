@@ -64,12 +64,17 @@ pub struct ControllerSettings {
     pub disturbance_bound: f64,
     /// Largest actuation length, samples (<= N).
     pub max_actuation_samples: usize,
-    /// Terminal hold (dual-mode MPC): entered when every estimated position
-    /// error is within `hold_enter_position_m` and every speed within
-    /// `hold_enter_speed_m_per_s`; left when a position error exceeds
-    /// `hold_release_position_m` or a speed `hold_release_speed_m_per_s`.
-    /// Inside, a gentle linear law damps the capsules' common motion instead
-    /// of re-planning separation manoeuvres for errors at the noise level.
+    /// Terminal hold (dual-mode MPC): entered when every speed is within
+    /// `hold_enter_speed_m_per_s`, the capsules' position errors lie within
+    /// `hold_enter_position_m` of the group's centre (their relative drift
+    /// extrapolated over `HOLD_DRIFT_HORIZON_S`; within
+    /// `hold_release_position_m` now) and the centre within
+    /// `HOLD_CENTRE_ENTER_M` of the target; left when a speed exceeds
+    /// `hold_release_speed_m_per_s`, an error lies farther than
+    /// `hold_release_position_m` from the centre, or the centre farther
+    /// than `HOLD_CENTRE_RELEASE_M`. Inside, a gentle linear law brings the
+    /// centre to the target and damps the common motion instead of
+    /// re-planning separation manoeuvres for errors at the noise level.
     pub hold_enter_position_m: f64,
     pub hold_enter_speed_m_per_s: f64,
     pub hold_release_position_m: f64,
@@ -132,6 +137,12 @@ pub const HOLD_RELEASE_POSITION_M: f64 = 1.0e-3;
 pub const HOLD_RELEASE_SPEED_M_PER_S: f64 = 10.0e-3;
 /// How far ahead the hold entry extrapolates the capsules' relative drift, s.
 pub const HOLD_DRIFT_HORIZON_S: f64 = 1.0;
+/// The hold is entered only while the group's centre (midpoint of the
+/// extreme position errors) is within this distance of the target, m: the
+/// hold law then moves the capsules at most a few mm/s.
+pub const HOLD_CENTRE_ENTER_M: f64 = 2.0e-3;
+/// The hold is left when the centre is farther than this, m.
+pub const HOLD_CENTRE_RELEASE_M: f64 = 3.0e-3;
 /// Natural frequency of the hold law, rad/s (critically damped).
 pub const HOLD_NATURAL_FREQUENCY_RAD_PER_S: f64 = 6.0;
 /// The hold law uses at most this fraction of u_max.
