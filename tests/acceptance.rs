@@ -357,31 +357,29 @@ fn late_rows<'a>(outcomes: impl Iterator<Item = &'a Outcome>) -> Vec<String> {
         .collect()
 }
 
-/// The issue's thresholds where they hold: constant sampling settles within
-/// 2.5 s wherever the ideal-sampling minimum time is under 1 s, under all
-/// three disturbance models, every seed (measured worst 1.35 s).
+/// The issue's thresholds where they hold: wherever the ideal-sampling
+/// minimum time is under 1 s, constant sampling settles within 2.5 s and
+/// variable sampling within 2.0 s, under all three disturbance models,
+/// every seed (measured worst: constant 1.35 s, variable 1.86 s; variable
+/// was 2.14-2.28 s before the centred hold).
 #[test]
-fn short_moves_settle_within_2_5_s_under_constant_sampling() {
+fn short_moves_settle_within_the_issue_deadlines() {
     let grid = settling_grid();
     for o in grid {
         assert!(o.metrics.max_abs_u <= 0.04 + 1e-12, "{}", o.row());
     }
-    let short = grid
-        .iter()
-        .filter(|o| o.case.sampling == Sampling::Constant && o.bound_s < 1.0);
+    let short = grid.iter().filter(|o| o.bound_s < 1.0);
     let late = late_rows(short);
     assert!(late.is_empty(), "late runs:\n{HEADER}\n{}", late.join("\n"));
 }
 
 /// Where the issue's settling thresholds are NOT met, the measured worst
-/// cases (margin about 0.15 s), so that a regression shows and an
+/// cases (margin about 0.1 s), so that a regression shows and an
 /// improvement can tighten them (README, "Acceptance over the workspace"):
-/// - variable sampling, minimum time under 1 s: worst 2.14 s against 2.0 s
-///   ((1, -3) cm, seed 3, every model);
-/// - minimum time of 1 s or more (far and chained moves): constant sampling
-///   worst 1.31 s over bound + 1.5 s; variable sampling worst 1.15 s over
-///   bound + 1.0 s among the runs that settle and hold 1 s before the run
-///   ends (deadline + 3 s), and 2 of 168 runs that do not.
+/// minimum time of 1 s or more (far and chained moves): constant sampling
+/// worst 0.62 s over bound + 1.5 s ((-5, 2) cm, constant bias); variable
+/// sampling worst 0.45 s over bound + 1.0 s ((4, 4) -> (-2, 1) cm); every
+/// run settles and holds 1 s before the run ends (deadline + 3 s).
 #[test]
 fn measured_worst_settling_where_the_issue_thresholds_fail() {
     let grid = settling_grid();
@@ -410,17 +408,17 @@ fn measured_worst_settling_where_the_issue_thresholds_fail() {
     };
     let (settle, _, never) = worst(Sampling::Variable, false);
     assert_eq!(never, 0);
-    assert!(settle <= 2.3, "variable, short moves: worst {settle} s");
+    assert!(settle <= 2.0, "variable, short moves: worst {settle} s");
     let (_, excess, never) = worst(Sampling::Constant, true);
     assert_eq!(never, 0);
     assert!(
-        excess <= 1.5,
+        excess <= 0.75,
         "constant, far moves: worst excess {excess} s"
     );
     let (_, excess, never) = worst(Sampling::Variable, true);
-    assert!(never <= 2, "variable, far moves: {never} never settled");
+    assert_eq!(never, 0, "variable, far moves: {never} never settled");
     assert!(
-        excess <= 1.3,
+        excess <= 0.55,
         "variable, far moves: worst excess {excess} s"
     );
 }
@@ -449,12 +447,12 @@ fn measured_station_keeping_over_10_s() {
         assert!(o.duration_s - entry >= 10.0, "{}", o.row());
     }
     for (sampling, model, measured) in [
-        (Sampling::Constant, DisturbanceKind::Random, 0.61),
-        (Sampling::Constant, DisturbanceKind::Drift, 0.58),
-        (Sampling::Constant, DisturbanceKind::Constant, 0.57),
-        (Sampling::Variable, DisturbanceKind::Random, 0.71),
-        (Sampling::Variable, DisturbanceKind::Drift, 0.79),
-        (Sampling::Variable, DisturbanceKind::Constant, 0.54),
+        (Sampling::Constant, DisturbanceKind::Random, 0.94),
+        (Sampling::Constant, DisturbanceKind::Drift, 0.92),
+        (Sampling::Constant, DisturbanceKind::Constant, 0.88),
+        (Sampling::Variable, DisturbanceKind::Random, 0.91),
+        (Sampling::Variable, DisturbanceKind::Drift, 0.88),
+        (Sampling::Variable, DisturbanceKind::Constant, 0.73),
     ] {
         let os: Vec<&Outcome> = outcomes
             .iter()
