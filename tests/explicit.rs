@@ -190,8 +190,8 @@ fn explicit_plan_matches_clarabel_on_the_stored_qp() {
         let Some(used) = explicit::explicit_slot(&e, coasted, usize::MAX) else {
             continue;
         };
-        let out =
-            explicit::explicit_plan(&e, coasted, usize::MAX, &mut qp, &mut plan).expect("in range");
+        let out = explicit::explicit_plan(&e, coasted, usize::MAX, None, &mut qp, &mut plan)
+            .expect("in range");
         assert_eq!(out.slot, used);
         assert!(out.converged, "QP did not converge at slot {used}");
         let s = &g.samples[used];

@@ -199,6 +199,10 @@ pub mod explicit_tables {
     /// Slot value of a cell without a sample.
     pub const NO_SLOT: u16 = 65535u16;
     pub static EXPLICIT: [ExplicitSample; EXPLICIT_COUNT] = [];
+    /// Every sample's `state` again, contiguous: the candidate
+    /// search compares up to 2 NX + 2 of them per step, and 32-byte
+    /// rows stay in cache where 1 kB samples do not.
+    pub static EXPLICIT_STATE: [[f64; NX]; EXPLICIT_COUNT] = [];
     /// Per kept cell of the sparse warm-start index (parallel to
     /// `tables::INDEX_CELLS`; empty without an explicit tier): the
     /// slot of its sample (back to back, and constant sampling's).
@@ -264,6 +268,11 @@ pub mod solver {
         explicit_ready: bool,
         /// Slot of the explicit tier's last stored sample (usize::MAX: none).
         explicit_slot: usize,
+        /// The explicit QP's last active set, shifted with the plan: the next
+        /// explicit QP's warm start (consecutive windows overlap in N - 1
+        /// inputs, so their active sets mostly agree; the stored sample's set,
+        /// the solution at zero deviation, took 9 iterations at the median).
+        explicit_active: [i8; N],
         /// Which tier produced `plan`.
         tier: Tier,
     }
@@ -346,6 +355,7 @@ pub mod solver {
                 explicit_plan: [0.0; K],
                 explicit_ready: false,
                 explicit_slot: usize::MAX,
+                explicit_active: [0; N],
                 tier: Tier::Refined,
             }
         }
@@ -359,6 +369,7 @@ pub mod solver {
             self.has_plan = false;
             self.explicit_ready = false;
             self.explicit_slot = usize::MAX;
+            self.explicit_active = [0; N];
         }
         /// The explicit tier from `e` (see the `explicit` module): the stored
         /// sample's window QP at the deviation, no rollout. The plan becomes a
@@ -375,16 +386,23 @@ pub mod solver {
                 tier: Tier::Explicit,
             };
             let coasted = self.schedule.coasted();
+            let warm = if self.explicit_slot == usize::MAX {
+                None
+            } else {
+                Some(&self.explicit_active)
+            };
             match super::explicit::explicit_plan(
                 e,
                 coasted,
                 self.explicit_slot,
+                warm,
                 &mut self.qp,
                 &mut self.explicit_plan,
             ) {
                 Some(out) => {
                     self.explicit_ready = true;
                     self.explicit_slot = out.slot;
+                    self.explicit_active = self.qp.active;
                     report.cost = out.predicted_cost;
                     report.qp_iterations = out.qp_iterations;
                     report.max_qp_iterations = out.qp_iterations;
@@ -432,6 +450,15 @@ pub mod solver {
             while i < K {
                 self.plan[i] = if i + s < K { self.plan[i + s] } else { 0.0 };
                 i += 1;
+            }
+            let mut a = 0;
+            while a < N {
+                self.explicit_active[a] = if a + s < N {
+                    self.explicit_active[a + s]
+                } else {
+                    0
+                };
+                a += 1;
             }
         }
         /// Whether a start at rest at relative position `e` (speeds ignored) is
@@ -1484,7 +1511,8 @@ pub mod explicit {
     //! successor on its plan; (2) the deviation d = e - (the sample's stored
     //! state); (3) the window QP's gradient F d from the stored sensitivities,
     //! its Hessian and the box of the stored plan's inputs; (4) the box QP,
-    //! warm-started from the active set of the stored solution; (5) plan =
+    //! warm-started from the previous step's active set (shifted with the
+    //! plan), else from the stored solution's; (5) plan =
     //! stored inputs + the QP's step, clamped, then the stored tail. The linearization was done
     //! offline (`capsule-mpc-generator`'s `explicit`); every loop here has a
     //! constant bound, and the QP stops at `QP_MAX_ITERATIONS`, so the
@@ -1549,12 +1577,15 @@ pub mod explicit {
         while j > 0 {
             j -= 1;
             let count = axis_of(j).count;
+            let span = if stride < cells as u64 { stride as usize } else { cells };
             if idx[j] > 0 {
-                let slot = slot_of_cell(slots, flat - stride, 0, split);
+                let lo = split.saturating_sub(span);
+                let slot = slot_of_cell(slots, flat - stride, lo, split);
                 consider(e, slot, &mut best, &mut best_distance);
             }
             if idx[j] + 1 < count {
-                let slot = slot_of_cell(slots, flat + stride, split, cells);
+                let hi = if split + span + 1 < cells { split + span + 1 } else { cells };
+                let slot = slot_of_cell(slots, flat + stride, split, hi);
                 consider(e, slot, &mut best, &mut best_distance);
             }
             stride *= count as u64;
@@ -1586,7 +1617,7 @@ pub mod explicit {
         if slot >= EXPLICIT_COUNT {
             return;
         }
-        let state = &EXPLICIT[slot].state;
+        let state = &EXPLICIT_STATE[slot];
         let mut dist = 0.0;
         let mut j = 0;
         while j < NX {
@@ -1655,11 +1686,13 @@ pub mod explicit {
     }
     /// The explicit plan for relative state `e` into `out` (`coasted`:
     /// constant sampling's tables; `last`: the previous step's slot, or
-    /// `usize::MAX`); None outside the index and the fine grid.
+    /// `usize::MAX`; `warm`: the QP's starting active set, None for the stored
+    /// sample's); None outside the index and the fine grid.
     pub fn explicit_plan(
         e: &[f64; NX],
         coasted: bool,
         last: usize,
+        warm: Option<&[i8; N]>,
         qp: &mut BoxQp,
         out: &mut [f64; K],
     ) -> Option<ExplicitOutcome> {
@@ -1673,7 +1706,11 @@ pub mod explicit {
             j += 1;
         }
         load_qp(s, &d, out, qp);
-        let (iterations, converged) = qp.solve_from(&s.active);
+        let start = match warm {
+            Some(active) => active,
+            None => &s.active,
+        };
+        let (iterations, converged) = qp.solve_from(start);
         let mut a = 0;
         while a < N {
             out[a] = clamp_u(out[a] + qp.x[a]);

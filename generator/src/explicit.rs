@@ -119,10 +119,11 @@ const ACTIVE_TOLERANCE_T_PER_M: f64 = 1.0e-7;
 
 impl ExplicitTables {
     /// Bytes the emitted arrays take (f64 = 8, slots 2, flags 1, the
-    /// sample's source/plan/offset 5).
+    /// sample's source/plan/offset 5; the states once more in the compact
+    /// `EXPLICIT_STATE` the candidate search reads).
     pub fn bytes(&self, n: usize, nx: usize) -> usize {
         let doubles = nx + n * (n + 1) / 2 + n + n * nx + 1 + nx + nx * nx;
-        self.samples.len() * (8 * doubles + n + 7)
+        self.samples.len() * (8 * doubles + n + 7 + 8 * nx)
             + 2 * (self.index_slot.len()
                 + self.coasted_index_slot.len()
                 + self.fine_slot.len()

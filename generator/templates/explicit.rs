@@ -6,7 +6,8 @@
 //! successor on its plan; (2) the deviation d = e - (the sample's stored
 //! state); (3) the window QP's gradient F d from the stored sensitivities,
 //! its Hessian and the box of the stored plan's inputs; (4) the box QP,
-//! warm-started from the active set of the stored solution; (5) plan =
+//! warm-started from the previous step's active set (shifted with the
+//! plan), else from the stored solution's; (5) plan =
 //! stored inputs + the QP's step, clamped, then the stored tail. The linearization was done
 //! offline (`capsule-mpc-generator`'s `explicit`); every loop here has a
 //! constant bound, and the QP stops at `QP_MAX_ITERATIONS`, so the
@@ -69,17 +70,23 @@ pub fn explicit_slot(e: &[f64; NX], coasted: bool, last: usize) -> Option<usize>
     let split = index_lower_bound(flat, 0, cells);
     consider(e, slot_of_cell(slots, flat, split, cells), &mut best, &mut best_distance);
     // Neighbours: stride of axis j = product of the later axes' counts.
+    // Kept cells are distinct integers, so at most `stride` of them lie
+    // between a neighbour and the cell: the bisection needs only that span
+    // of `INDEX_CELLS` (no probe at all along the last axis).
     let mut stride = 1u64;
     let mut j = NX;
     while j > 0 {
         j -= 1;
         let count = axis_of(j).count;
+        let span = if stride < cells as u64 { stride as usize } else { cells };
         if idx[j] > 0 {
-            let slot = slot_of_cell(slots, flat - stride, 0, split);
+            let lo = split.saturating_sub(span);
+            let slot = slot_of_cell(slots, flat - stride, lo, split);
             consider(e, slot, &mut best, &mut best_distance);
         }
         if idx[j] + 1 < count {
-            let slot = slot_of_cell(slots, flat + stride, split, cells);
+            let hi = if split + span + 1 < cells { split + span + 1 } else { cells };
+            let slot = slot_of_cell(slots, flat + stride, split, hi);
             consider(e, slot, &mut best, &mut best_distance);
         }
         stride *= count as u64;
@@ -122,7 +129,7 @@ fn consider(e: &[f64; NX], slot: usize, best: &mut usize, best_distance: &mut f6
     if slot >= EXPLICIT_COUNT {
         return;
     }
-    let state = &EXPLICIT[slot].state;
+    let state = &EXPLICIT_STATE[slot];
     let mut dist = 0.0;
     let mut j = 0;
     while j < NX {
@@ -195,11 +202,13 @@ pub fn load_qp(s: &ExplicitSample, d: &[f64; NX], u: &[f64; K], qp: &mut BoxQp) 
 
 /// The explicit plan for relative state `e` into `out` (`coasted`:
 /// constant sampling's tables; `last`: the previous step's slot, or
-/// `usize::MAX`); None outside the index and the fine grid.
+/// `usize::MAX`; `warm`: the QP's starting active set, None for the stored
+/// sample's); None outside the index and the fine grid.
 pub fn explicit_plan(
     e: &[f64; NX],
     coasted: bool,
     last: usize,
+    warm: Option<&[i8; N]>,
     qp: &mut BoxQp,
     out: &mut [f64; K],
 ) -> Option<ExplicitOutcome> {
@@ -213,7 +222,11 @@ pub fn explicit_plan(
         j += 1;
     }
     load_qp(s, &d, out, qp);
-    let (iterations, converged) = qp.solve_from(&s.active);
+    let start = match warm {
+        Some(active) => active,
+        None => &s.active,
+    };
+    let (iterations, converged) = qp.solve_from(start);
     let mut a = 0;
     while a < N {
         out[a] = clamp_u(out[a] + qp.x[a]);

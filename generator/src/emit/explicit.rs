@@ -53,6 +53,14 @@ pub fn emit_explicit_tables(
             })
         })
         .collect::<Result<Vec<_>, EmitError>>()?;
+    let states = t
+        .samples
+        .iter()
+        .map(|s| {
+            let state = floats("explicit state", &s.state)?;
+            Ok(quote! { [#(#state),*] })
+        })
+        .collect::<Result<Vec<_>, EmitError>>()?;
     let count = samples.len();
     let index_slot = &t.index_slot;
     let coasted_index_slot = &t.coasted_index_slot;
@@ -105,6 +113,10 @@ pub fn emit_explicit_tables(
             /// Slot value of a cell without a sample.
             pub const NO_SLOT: u16 = #NO_SLOT;
             pub static EXPLICIT: [ExplicitSample; EXPLICIT_COUNT] = [#(#samples),*];
+            /// Every sample's `state` again, contiguous: the candidate
+            /// search compares up to 2 NX + 2 of them per step, and 32-byte
+            /// rows stay in cache where 1 kB samples do not.
+            pub static EXPLICIT_STATE: [[f64; NX]; EXPLICIT_COUNT] = [#(#states),*];
             /// Per kept cell of the sparse warm-start index (parallel to
             /// `tables::INDEX_CELLS`; empty without an explicit tier): the
             /// slot of its sample (back to back, and constant sampling's).
