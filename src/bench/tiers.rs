@@ -30,9 +30,13 @@ use std::hint::black_box;
 /// Passes over the states; the per-state minimum is reported.
 pub const REPEATS: usize = 3;
 
+/// A timed step's start: the solver after its first explicit step, and
+/// the state one sample later.
+type Start = (solver::Solver, [f64; NX]);
+
 /// The state after one explicit sample from `e`, and the solver that
 /// played it (its last slot set as in the closed loop); None out of range.
-fn after_one_explicit_sample(e: &[f64; NX]) -> Option<(solver::Solver, [f64; NX])> {
+fn after_one_explicit_sample(e: &[f64; NX]) -> Option<Start> {
     let mut s = solver::Solver::new();
     if s.solve_explicit(e).status == SolveStatus::OutOfRange {
         return None;
@@ -45,7 +49,7 @@ fn after_one_explicit_sample(e: &[f64; NX]) -> Option<(solver::Solver, [f64; NX]
 
 /// Times both tiers; returns the `tiers` JSON and prints the table.
 pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
-    let (origins, starts): (Vec<[f64; NX]>, Vec<(solver::Solver, [f64; NX])>) = states
+    let (origins, starts): (Vec<[f64; NX]>, Vec<Start>) = states
         .iter()
         .filter_map(|s| after_one_explicit_sample(&s.e).map(|start| (s.e, start)))
         .unzip();
@@ -144,7 +148,7 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
 /// through clarabel (and OSQP with `peers-osqp`), timed against the
 /// generated active-set QP warm-started from the stored active set; the
 /// ratio is peer / ours at the median, with the largest input difference.
-fn explicit_qp_peers(starts: &[(solver::Solver, [f64; NX])], peer_count: usize) -> Value {
+fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
     let count = peer_count.min(starts.len());
     let stride = (starts.len() / count.max(1)).max(1);
     let mut cases: Vec<(DenseQp, usize)> = Vec::new();
