@@ -1065,10 +1065,47 @@ pub mod solver {
         }
         Some(flat)
     }
+    /// As `fine_cell` for a state at rest beyond the fine grid but within half
+    /// a main grid step of the target, where the main grid's nearest plan is
+    /// the target's own, empty one (for three capsules: fine grid +-2 mm, main
+    /// step 1 cm; at rest 2.8 mm off, the refinement from that empty plan
+    /// played zero gradient for 2.3 s). Positions are clamped to the fine
+    /// grid's edge: its plan is a rest-to-rest leg that brings the capsules
+    /// into the fine grid (legs compose exactly; the dynamics do not depend on
+    /// position), and the refinement and the next fine plan finish the move.
+    fn fine_cell_clamped(e: &[f64; NX]) -> Option<usize> {
+        if FINE_COUNT == 0 {
+            return None;
+        }
+        let lo = FINE_AXIS.start;
+        let hi = FINE_AXIS.start + (FINE_AXIS.count - 1) as f64 * FINE_AXIS.step;
+        let half_main = 0.5 * PLAN_AXIS.step;
+        let mut flat = 0usize;
+        let mut i = 0;
+        while i < M {
+            let p = e[2 * i];
+            if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S)
+                || !(libm::fabs(p) <= half_main)
+            {
+                return None;
+            }
+            let clamped = if p < lo { lo } else if p > hi { hi } else { p };
+            flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, clamped)?;
+            i += 1;
+        }
+        if flat >= FINE_COUNT {
+            return None;
+        }
+        Some(flat)
+    }
     /// Fills `out` with the fine plan from rest nearest relative state `e`
-    /// (see `fine_cell`); None off the fine grid or where it has no plan.
+    /// (see `fine_cell`, then `fine_cell_clamped`); None off the fine grid and
+    /// beyond its clamp, or where it has no plan.
     pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
-        let flat = fine_cell(e)?;
+        let flat = match fine_cell(e) {
+            Some(flat) => flat,
+            None => fine_cell_clamped(e)?,
+        };
         if !FINE_REACHED[flat] {
             return None;
         }
