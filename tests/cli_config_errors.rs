@@ -176,3 +176,16 @@ fn workspace_errors_name_the_capsule_bound_and_excess() {
     ));
     assert_one_line_error(&out, "workspace.position_max_m");
 }
+
+/// A run longer than the simulator keeps in memory is refused up front
+/// with the bound, not run for hours (or until memory runs out).
+#[test]
+fn an_overlong_run_is_refused_with_the_bound() {
+    for command in ["simulate", "reach"] {
+        let out = bin()
+            .args([command, "--duration", "1e9"])
+            .output()
+            .expect("runs");
+        assert_one_line_error(&out, "run duration 1000000000 s is outside (0, 600] s");
+    }
+}

@@ -189,9 +189,24 @@ pub fn compiled_controller_for(config: &Config) -> Result<ControllerModule> {
     )
 }
 
+/// Longest simulated run, s: the report keeps every plant step (1 ms), so
+/// 600 s is 600 000 rows, tens of MB; a maneuver takes seconds.
+pub const MAX_RUN_DURATION_S: f64 = 600.0;
+
+/// A run duration in (0, `MAX_RUN_DURATION_S`] s, or an error naming it.
+pub fn check_duration(duration_s: f64) -> Result<()> {
+    if !(duration_s > 0.0 && duration_s <= MAX_RUN_DURATION_S) {
+        bail!(
+            "run duration {duration_s} s is outside (0, {MAX_RUN_DURATION_S}] s (the report keeps every 1 ms plant step)"
+        );
+    }
+    Ok(())
+}
+
 /// Runs the closed loop and returns the full report.
 pub fn run(config: &Config, opts: &RunOptions) -> Result<RunReport> {
     use capsule_mpc_runtime::generated::{controller, paper_preset, three_capsules};
+    check_duration(opts.duration_s)?;
     let module = compiled_controller_for(config)?;
     match (opts.preset, module) {
         (Preset::Default, ControllerModule::Controller) => {

@@ -157,6 +157,8 @@ pub fn reach_map(
     let duration_s = opts
         .duration_s
         .unwrap_or_else(|| default_duration_s(opts.range_m, opts.sampling));
+    // A bad duration would refuse every target: say so once.
+    crate::closed_loop::check_duration(duration_s)?;
     let points = targets
         .par_iter()
         .map(|t| {
