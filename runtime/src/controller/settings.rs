@@ -144,7 +144,7 @@ pub const HOLD_CENTRE_ENTER_M: f64 = 2.0e-3;
 /// The hold is left when the centre is farther than this, m.
 pub const HOLD_CENTRE_RELEASE_M: f64 = 3.0e-3;
 /// Natural frequency of the hold law, rad/s (critically damped).
-pub const HOLD_NATURAL_FREQUENCY_RAD_PER_S: f64 = 6.0;
+pub const HOLD_NATURAL_FREQUENCY_RAD_PER_S: f64 = 10.0;
 /// The hold law uses at most this fraction of u_max.
 pub const HOLD_MAX_GRADIENT_FRACTION: f64 = 0.25;
 /// Default re-acquisition count, frames: 0.2 s at the default constant
