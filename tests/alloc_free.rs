@@ -76,6 +76,11 @@ fn counter_sees_allocations() {
 
 /// Scenario's target and the states of its ideal closed-loop run (simulated
 /// with the counter off).
+/// `x - target` (the solver works on the state relative to the target).
+fn relative(x: &[f64; spec::NX], target: &[f64; spec::NX]) -> [f64; spec::NX] {
+    core::array::from_fn(|j| x[j] - target[j])
+}
+
 fn trajectory(config: &Config, scenario: Scenario) -> ([f64; spec::NX], Vec<[f64; spec::NX]>) {
     let target_v = scenario.target_state();
     let target: [f64; spec::NX] = target_v.as_slice().try_into().unwrap();
@@ -155,10 +160,7 @@ fn controller_cycles_do_not_allocate() {
         let mut s = solver::Solver::new();
         let (_, n) = counted(|| {
             for x in &rows {
-                let mut e = *x;
-                for j in 0..spec::NX {
-                    e[j] -= target[j];
-                }
+                let e = relative(x, &target);
                 s.shift(1);
                 s.solve(&e);
             }
@@ -213,10 +215,7 @@ fn both_tiers_do_not_allocate() {
         let mut s = solver::Solver::new();
         let (_, n) = counted(|| {
             for x in &rows {
-                let mut e = *x;
-                for j in 0..spec::NX {
-                    e[j] -= target[j];
-                }
+                let e = relative(x, &target);
                 s.solve_explicit(&e);
                 s.adopt_explicit();
                 s.shift(1);

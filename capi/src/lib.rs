@@ -545,15 +545,8 @@ pub unsafe extern "C" fn capsule_mpc_set_refine(handle: *mut CapsuleMpc, mode: i
 /// `handle` as for `capsule_mpc_reset`; `tier` valid for one write.
 #[no_mangle]
 pub unsafe extern "C" fn capsule_mpc_last_tier(handle: *mut CapsuleMpc, tier: *mut i32) -> i32 {
-    let r = (|| {
-        // SAFETY: see the function's contract; the helpers check pointers.
-        let ws = unsafe { workspace(handle) }?;
-        check_ptr(tier)?;
-        // SAFETY: checked above.
-        unsafe { write_out(tier, ws.last_tier) };
-        Ok(())
-    })();
-    code(r)
+    // SAFETY: the caller's contract is `get_i32`'s.
+    unsafe { get_i32(handle, tier, |ws| ws.last_tier) }
 }
 
 /// Status of the last cycle (`CAPSULE_MPC_STATUS_NO_TARGET` before any).
@@ -562,12 +555,25 @@ pub unsafe extern "C" fn capsule_mpc_last_tier(handle: *mut CapsuleMpc, tier: *m
 /// `handle` as for `capsule_mpc_reset`; `status` valid for one write.
 #[no_mangle]
 pub unsafe extern "C" fn capsule_mpc_last_status(handle: *mut CapsuleMpc, status: *mut i32) -> i32 {
+    // SAFETY: the caller's contract is `get_i32`'s.
+    unsafe { get_i32(handle, status, |ws| ws.last_status as i32) }
+}
+
+/// The getters' shared body: one `i32` of the workspace into `out`.
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`; `out` valid for one write.
+unsafe fn get_i32(
+    handle: *mut CapsuleMpc,
+    out: *mut i32,
+    value: impl FnOnce(&CapsuleMpc) -> i32,
+) -> i32 {
     let r = (|| {
         // SAFETY: see the function's contract; the helpers check pointers.
         let ws = unsafe { workspace(handle) }?;
-        check_ptr(status)?;
+        check_ptr(out)?;
         // SAFETY: checked above.
-        unsafe { write_out(status, ws.last_status as i32) };
+        unsafe { write_out(out, value(ws)) };
         Ok(())
     })();
     code(r)

@@ -173,10 +173,9 @@ pub mod explicit_tables {
         /// 3 fine with the coast.
         pub source: u8,
         pub plan: u16,
-        /// Plan sample the window starts at.
+        /// Plan sample the window starts at (its relative state,
+        /// the linearization point, is `EXPLICIT_STATE[slot]`).
         pub offset: u16,
-        /// The stored relative state there (linearization point).
-        pub state: [f64; NX],
         /// Condensed Hessian, upper triangle row by row.
         pub hessian: [f64; HESSIAN_LEN],
         /// Gradient of the online cost in the window inputs at zero
@@ -199,9 +198,10 @@ pub mod explicit_tables {
     /// Slot value of a cell without a sample.
     pub const NO_SLOT: u16 = 65535u16;
     pub static EXPLICIT: [ExplicitSample; EXPLICIT_COUNT] = [];
-    /// Every sample's `state` again, contiguous: the candidate
-    /// search compares up to 2 NX + 2 of them per step, and 32-byte
-    /// rows stay in cache where 1 kB samples do not.
+    /// Every sample's relative state (its linearization point),
+    /// apart from the sample: the candidate search compares up to
+    /// 2 NX + 2 of them per step, and 32-byte rows stay in cache
+    /// where 1 kB samples do not.
     pub static EXPLICIT_STATE: [[f64; NX]; EXPLICIT_COUNT] = [];
     /// Per kept cell of the sparse warm-start index (parallel to
     /// `tables::INDEX_CELLS`; empty without an explicit tier): the
@@ -1048,6 +1048,11 @@ pub mod solver {
     /// below `FINE_REST_SPEED_M_PER_S` and every position on the fine grid;
     /// None otherwise.
     pub fn fine_cell(e: &[f64; NX]) -> Option<usize> {
+        fine_cell_reaching(e, 0.0)
+    }
+    /// As `fine_cell`, but a position off the fine grid within `reach_m` of
+    /// the target takes the grid's nearest edge.
+    fn fine_cell_reaching(e: &[f64; NX], reach_m: f64) -> Option<usize> {
         if FINE_COUNT == 0 {
             return None;
         }
@@ -1057,40 +1062,15 @@ pub mod solver {
             if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S) {
                 return None;
             }
-            flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, e[2 * i])?;
-            i += 1;
-        }
-        if flat >= FINE_COUNT {
-            return None;
-        }
-        Some(flat)
-    }
-    /// As `fine_cell` for a state at rest beyond the fine grid but within half
-    /// a main grid step of the target, where the main grid's nearest plan is
-    /// the target's own, empty one (for three capsules: fine grid +-2 mm, main
-    /// step 1 cm; at rest 2.8 mm off, the refinement from that empty plan
-    /// played zero gradient for 2.3 s). Positions are clamped to the fine
-    /// grid's edge: its plan is a rest-to-rest leg that brings the capsules
-    /// into the fine grid (legs compose exactly; the dynamics do not depend on
-    /// position), and the refinement and the next fine plan finish the move.
-    fn fine_cell_clamped(e: &[f64; NX]) -> Option<usize> {
-        if FINE_COUNT == 0 {
-            return None;
-        }
-        let lo = FINE_AXIS.start;
-        let hi = FINE_AXIS.start + (FINE_AXIS.count - 1) as f64 * FINE_AXIS.step;
-        let half_main = 0.5 * PLAN_AXIS.step;
-        let mut flat = 0usize;
-        let mut i = 0;
-        while i < M {
             let p = e[2 * i];
-            if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S)
-                || !(libm::fabs(p) <= half_main)
-            {
-                return None;
-            }
-            let clamped = if p < lo { lo } else if p > hi { hi } else { p };
-            flat = flat * FINE_AXIS.count + axis_nearest(&FINE_AXIS, clamped)?;
+            let j = match axis_nearest(&FINE_AXIS, p) {
+                Some(j) => j,
+                None if libm::fabs(p) <= reach_m => {
+                    if p < FINE_AXIS.start { 0 } else { FINE_AXIS.count - 1 }
+                }
+                None => return None,
+            };
+            flat = flat * FINE_AXIS.count + j;
             i += 1;
         }
         if flat >= FINE_COUNT {
@@ -1099,13 +1079,17 @@ pub mod solver {
         Some(flat)
     }
     /// Fills `out` with the fine plan from rest nearest relative state `e`
-    /// (see `fine_cell`, then `fine_cell_clamped`); None off the fine grid and
-    /// beyond its clamp, or where it has no plan.
+    /// (see `fine_cell`); None off the fine grid, or where it has no plan.
+    ///
+    /// Positions beyond the fine grid but within half a main grid step of the
+    /// target, where the main grid's nearest plan is the target's own, empty
+    /// one, take the grid's edge (for three capsules: fine grid +-2 mm, main
+    /// step 1 cm; at rest 2.8 mm off, the refinement from the empty plan
+    /// played zero gradient for 2.3 s). That edge plan is a rest-to-rest leg
+    /// into the fine grid (legs compose exactly: the dynamics do not depend on
+    /// position); the refinement and the next fine plan finish the move.
     pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
-        let flat = match fine_cell(e) {
-            Some(flat) => flat,
-            None => fine_cell_clamped(e)?,
-        };
+        let flat = fine_cell_reaching(e, 0.5 * PLAN_AXIS.step)?;
         if !FINE_REACHED[flat] {
             return None;
         }
@@ -1736,10 +1720,11 @@ pub mod explicit {
         let slot = explicit_slot(e, coasted, last)?;
         let s = &EXPLICIT[slot];
         stored_tail(s, out);
+        let state = &EXPLICIT_STATE[slot];
         let mut d = [0.0; NX];
         let mut j = 0;
         while j < NX {
-            d[j] = e[j] - s.state[j];
+            d[j] = e[j] - state[j];
             j += 1;
         }
         load_qp(s, &d, out, qp);

@@ -119,11 +119,10 @@ const ACTIVE_TOLERANCE_T_PER_M: f64 = 1.0e-7;
 
 impl ExplicitTables {
     /// Bytes the emitted arrays take (f64 = 8, slots 2, flags 1, the
-    /// sample's source/plan/offset 5; the states once more in the compact
-    /// `EXPLICIT_STATE` the candidate search reads).
+    /// sample's source/plan/offset 5; the state in `EXPLICIT_STATE`).
     pub fn bytes(&self, n: usize, nx: usize) -> usize {
         let doubles = nx + n * (n + 1) / 2 + n + n * nx + 1 + nx + nx * nx;
-        self.samples.len() * (8 * doubles + n + 7 + 8 * nx)
+        self.samples.len() * (8 * doubles + n + 7)
             + 2 * (self.index_slot.len()
                 + self.coasted_index_slot.len()
                 + self.fine_slot.len()

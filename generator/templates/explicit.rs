@@ -215,10 +215,11 @@ pub fn explicit_plan(
     let slot = explicit_slot(e, coasted, last)?;
     let s = &EXPLICIT[slot];
     stored_tail(s, out);
+    let state = &EXPLICIT_STATE[slot];
     let mut d = [0.0; NX];
     let mut j = 0;
     while j < NX {
-        d[j] = e[j] - s.state[j];
+        d[j] = e[j] - state[j];
         j += 1;
     }
     load_qp(s, &d, out, qp);

@@ -527,8 +527,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// The hold is the local controller of a dual-mode MPC, so its region
     /// is where that law works: the capsules nearly at rest, their spread
     /// about the group's centre (drift included) within the position
-    /// tolerance, and the centre itself within a few millimetres, which the
-    /// hold law corrects at a few mm/s. Requiring every capsule within the
+    /// tolerance, and the centre itself within 2 mm, which the hold law
+    /// (10 rad/s, critically damped) corrects at under 8 mm/s. Requiring every capsule within the
     /// tolerance of its own target instead refused arrivals such as
     /// (+0.98, -0.56) mm, which the hold centres to +-0.77 mm, and sent them
     /// back to the tables for a 0.4 s differential swing out of the band.
@@ -562,7 +562,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// u_max.
     fn hold_gradient(&self, e: &[f64; NX]) -> f64 {
         let (_, mean_v) = capsule_means(e);
-        let mean_x = capsule_centre_m(e);
+        let centre_m = capsule_centre_m(e);
         let mean_g = self.mean_gain;
         if mean_g.is_nan() || mean_g <= 0.0 {
             return 0.0;
@@ -572,7 +572,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             Sampling::Ideal => S::DT_S,
             Sampling::Constant | Sampling::Variable => S::DT_S + self.gap_s,
         };
-        let accel = -(w * w * mean_x + 2.0 * w * mean_v) * period_s / S::DT_S;
+        let accel = -(w * w * centre_m + 2.0 * w * mean_v) * period_s / S::DT_S;
         let bound = HOLD_MAX_GRADIENT_FRACTION * S::U_MAX_T_PER_M;
         (accel / mean_g).clamp(-bound, bound)
     }

@@ -10,7 +10,7 @@
 //! refinement `Solver::solve(e1)` (the SQP weighing the explicit plan by
 //! its true cost), i.e. what a cycle with `refine = once` costs in the
 //! solver. Min of `REPEATS` passes per state, one pinned thread. Each pass
-//! sweeps every state, so these are cold-cache times (6 MB of explicit
+//! sweeps every state, so these are cold-cache times (5.9 MB of explicit
 //! data); **explicit in the loop** times the same step right after its
 //! untimed predecessor, as the closed loop runs it.
 
@@ -74,7 +74,7 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
     // In the loop: each state's step timed right after the step before it
     // (from `e`, untimed), as the closed loop calls it; the data that step
     // touched is in cache. The sweep above times every state cold instead
-    // (100 000 states cycle through 6 MB of explicit data).
+    // (100 000 states cycle through 5.9 MB of explicit data).
     let mut in_loop_ns = vec![u64::MAX; starts.len()];
     for _ in 0..REPEATS {
         for (i, e) in origins.iter().enumerate() {

@@ -28,7 +28,6 @@ pub fn emit_explicit_tables(
             let source = s.source as u8;
             let plan = u16::try_from(s.plan).expect("plan index fits u16");
             let offset = u16::try_from(s.offset).expect("offset fits u16");
-            let state = floats("explicit state", &s.state)?;
             let hessian = floats("explicit hessian", &s.hessian)?;
             let gradient = floats("explicit gradient", &s.gradient)?;
             let sensitivity = matrix_rows("explicit sensitivity", &s.sensitivity, nx)?;
@@ -40,7 +39,6 @@ pub fn emit_explicit_tables(
             Ok(quote! {
                 ExplicitSample {
                     source: #source, plan: #plan, offset: #offset,
-                    state: [#(#state),*],
                     hessian: [#(#hessian),*],
                     gradient: [#(#gradient),*],
                     sensitivity: [#(#sensitivity),*],
@@ -87,10 +85,9 @@ pub fn emit_explicit_tables(
                 /// 3 fine with the coast.
                 pub source: u8,
                 pub plan: u16,
-                /// Plan sample the window starts at.
+                /// Plan sample the window starts at (its relative state,
+                /// the linearization point, is `EXPLICIT_STATE[slot]`).
                 pub offset: u16,
-                /// The stored relative state there (linearization point).
-                pub state: [f64; NX],
                 /// Condensed Hessian, upper triangle row by row.
                 pub hessian: [f64; HESSIAN_LEN],
                 /// Gradient of the online cost in the window inputs at zero
@@ -113,9 +110,10 @@ pub fn emit_explicit_tables(
             /// Slot value of a cell without a sample.
             pub const NO_SLOT: u16 = #NO_SLOT;
             pub static EXPLICIT: [ExplicitSample; EXPLICIT_COUNT] = [#(#samples),*];
-            /// Every sample's `state` again, contiguous: the candidate
-            /// search compares up to 2 NX + 2 of them per step, and 32-byte
-            /// rows stay in cache where 1 kB samples do not.
+            /// Every sample's relative state (its linearization point),
+            /// apart from the sample: the candidate search compares up to
+            /// 2 NX + 2 of them per step, and 32-byte rows stay in cache
+            /// where 1 kB samples do not.
             pub static EXPLICIT_STATE: [[f64; NX]; EXPLICIT_COUNT] = [#(#states),*];
             /// Per kept cell of the sparse warm-start index (parallel to
             /// `tables::INDEX_CELLS`; empty without an explicit tier): the

@@ -1,6 +1,7 @@
 //! The fallback outside the tables (a braking law that leaves the least
 //! distance to coast) and the capsules' common mode near rest (means,
-//! the mean gradient gain, the relative drift) that the hold law uses.
+//! the group's centre and spread, the mean gradient gain) that the hold
+//! law uses.
 
 use super::*;
 
@@ -83,12 +84,10 @@ pub(super) fn capsule_gain_and_drag<S: PlanSolver<NX, K>, const NX: usize, const
 }
 
 /// Near rest one gradient moves every capsule alike: it sets where the
-/// group stands (its centre, the midpoint of the extreme position errors)
-/// but not how the capsules stand relative to each other. Half the spread
-/// of the position errors about that centre, with each capsule's motion
-/// relative to the mean extrapolated over `horizon_s`, m: what no hold
-/// gradient can shrink.
-pub(super) fn half_spread_m<const NX: usize>(e: &[f64; NX], horizon_s: f64) -> f64 {
+/// group stands but not how the capsules stand relative to each other.
+/// The smallest and largest position error, m, each capsule's motion
+/// relative to the mean speed extrapolated over `horizon_s` (0: now).
+fn position_extent_m<const NX: usize>(e: &[f64; NX], horizon_s: f64) -> (f64, f64) {
     let (_, mean_v) = capsule_means(e);
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for i in 0..NX / 2 {
@@ -96,6 +95,13 @@ pub(super) fn half_spread_m<const NX: usize>(e: &[f64; NX], horizon_s: f64) -> f
         lo = lo.min(q);
         hi = hi.max(q);
     }
+    (lo, hi)
+}
+
+/// Half the spread of the position errors about their midpoint (see
+/// `position_extent_m`), m: what no hold gradient can shrink.
+pub(super) fn half_spread_m<const NX: usize>(e: &[f64; NX], horizon_s: f64) -> f64 {
+    let (lo, hi) = position_extent_m(e, horizon_s);
     0.5 * (hi - lo)
 }
 
@@ -103,11 +109,7 @@ pub(super) fn half_spread_m<const NX: usize>(e: &[f64; NX], horizon_s: f64) -> f
 /// position error, m. Bringing it to zero leaves every capsule within the
 /// half spread of its target, the best one gradient can do near rest.
 pub(super) fn capsule_centre_m<const NX: usize>(e: &[f64; NX]) -> f64 {
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for i in 0..NX / 2 {
-        lo = lo.min(e[2 * i]);
-        hi = hi.max(e[2 * i]);
-    }
+    let (lo, hi) = position_extent_m(e, 0.0);
     0.5 * (hi + lo)
 }
 

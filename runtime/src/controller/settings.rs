@@ -139,7 +139,8 @@ pub const HOLD_RELEASE_SPEED_M_PER_S: f64 = 10.0e-3;
 pub const HOLD_DRIFT_HORIZON_S: f64 = 1.0;
 /// The hold is entered only while the group's centre (midpoint of the
 /// extreme position errors) is within this distance of the target, m: the
-/// hold law then moves the capsules at most a few mm/s.
+/// hold law (critically damped at `HOLD_NATURAL_FREQUENCY_RAD_PER_S`) then
+/// moves the group at most w x / e, under 8 mm/s.
 pub const HOLD_CENTRE_ENTER_M: f64 = 2.0e-3;
 /// The hold is left when the centre is farther than this, m.
 pub const HOLD_CENTRE_RELEASE_M: f64 = 3.0e-3;
