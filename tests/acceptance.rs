@@ -377,7 +377,7 @@ fn short_moves_settle_within_the_issue_deadlines() {
 /// cases (margin about 0.1 s), so that a regression shows and an
 /// improvement can tighten them (README, "Acceptance over the workspace"):
 /// minimum time of 1 s or more (far and chained moves): constant sampling
-/// worst 0.62 s over bound + 1.5 s ((-5, 2) cm, constant bias); variable
+/// worst 0.53 s over bound + 1.5 s ((-5, 2) cm, constant bias); variable
 /// sampling worst 0.36 s over bound + 1.0 s ((4, 4) -> (-2, 1) cm); every
 /// run settles and holds 1 s before the run ends (deadline + 3 s).
 #[test]
@@ -412,7 +412,7 @@ fn measured_worst_settling_where_the_issue_thresholds_fail() {
     let (_, excess, never) = worst(Sampling::Constant, true);
     assert_eq!(never, 0);
     assert!(
-        excess <= 0.75,
+        excess <= 0.65,
         "constant, far moves: worst excess {excess} s"
     );
     let (_, excess, never) = worst(Sampling::Variable, true);
@@ -425,11 +425,14 @@ fn measured_worst_settling_where_the_issue_thresholds_fail() {
 
 /// Station keeping from the first entry into the band, for at least 10 s
 /// (the runs last deadline + 12 s), on a smaller grid: 5 moves x 2
-/// samplings x 3 models x 4 seeds. The issue asks for 95 % in the band;
-/// this is NOT met (README, Known limits: one gradient cannot hold the
-/// capsules' relative position against the disturbance without brief
-/// drag manoeuvres out of the band). Asserted: the measured worst
-/// fractions with a margin of 0.05, and the count of runs at 95 % or more.
+/// samplings x 3 models x 4 seeds. The issue asks for 95 % in the band.
+/// Met under the random and drifting disturbances (the hold's
+/// station-keeping dither holds the capsules' relative position through
+/// drag): asserted for every such run. NOT met under a constant bias
+/// (README, Known limits: inside the band drag gives less relative
+/// acceleration than the bias's relative part, so the capsules drift apart
+/// and a brief drag manoeuvre out of the band corrects them): asserted,
+/// the measured worst fractions with a margin of 0.05.
 #[test]
 fn measured_station_keeping_over_10_s() {
     let moves = [MOVES[0], MOVES[1], MOVES[2], MOVES[3], MOVES[12]];
@@ -447,12 +450,12 @@ fn measured_station_keeping_over_10_s() {
         assert!(o.duration_s - entry >= 10.0, "{}", o.row());
     }
     for (sampling, model, measured) in [
-        (Sampling::Constant, DisturbanceKind::Random, 0.95),
-        (Sampling::Constant, DisturbanceKind::Drift, 0.88),
-        (Sampling::Constant, DisturbanceKind::Constant, 0.87),
-        (Sampling::Variable, DisturbanceKind::Random, 0.94),
-        (Sampling::Variable, DisturbanceKind::Drift, 0.89),
-        (Sampling::Variable, DisturbanceKind::Constant, 0.71),
+        (Sampling::Constant, DisturbanceKind::Random, 0.97),
+        (Sampling::Constant, DisturbanceKind::Drift, 0.97),
+        (Sampling::Constant, DisturbanceKind::Constant, 0.90),
+        (Sampling::Variable, DisturbanceKind::Random, 0.99),
+        (Sampling::Variable, DisturbanceKind::Drift, 0.99),
+        (Sampling::Variable, DisturbanceKind::Constant, 0.80),
     ] {
         let os: Vec<&Outcome> = outcomes
             .iter()
@@ -466,9 +469,17 @@ fn measured_station_keeping_over_10_s() {
             disturbance_kind_name(model),
             os.len()
         );
-        assert!(
-            worst >= measured - 0.05,
-            "{sampling:?} {model:?}: worst in-band fraction {worst}"
-        );
+        if model == DisturbanceKind::Constant {
+            assert!(
+                worst >= measured - 0.05,
+                "{sampling:?} {model:?}: worst in-band fraction {worst}"
+            );
+        } else {
+            assert_eq!(
+                ok,
+                os.len(),
+                "{sampling:?} {model:?}: worst in-band fraction {worst} (measured {measured})"
+            );
+        }
     }
 }

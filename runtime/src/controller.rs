@@ -11,12 +11,14 @@ use capsule_mpc_generated::{Leg, PlanSolver, SolveReport, SolveStatus, Tier};
 mod braking;
 mod legs;
 mod settings;
+mod station;
 mod tracking;
 
 pub use braking::braking_gradient;
 use braking::*;
 pub use legs::check_workspace;
 pub use settings::*;
+pub use station::*;
 use tracking::*;
 
 /// Status of one cycle (the plan is always usable and within |u| <= u_max).
@@ -155,6 +157,8 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     /// Running estimate of the zero-gradient gap between actuation phases
     /// (tracking + delay), s: the coast the plans model.
     gap_s: f64,
+    /// The hold's relative-position law (see `station`).
+    station: StationKeeper<NX>,
 }
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
@@ -210,6 +214,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             recovering: false,
             actuation_end_s: None,
             gap_s: settings.wait_s(),
+            station: StationKeeper::new(&capsule_drags::<S, NX, K>()),
         };
         c.reset(positions_m)?;
         Ok(c)
@@ -244,6 +249,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.applied_samples = 0;
         self.last_cost = f64::INFINITY;
         self.holding = false;
+        self.station.forget();
         self.planned_phase_samples = self.settings.max_actuation_samples;
         self.update_schedule();
     }
@@ -537,9 +543,14 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let slow = |speed: f64| (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= speed);
         let centre_m = libm::fabs(capsule_centre_m(e));
         let was = self.holding;
+        let spread_m = half_spread_m(e, 0.0);
+        let outside = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > s.hold_release_position_m);
         self.holding = if was {
             slow(s.hold_release_speed_m_per_s)
-                && half_spread_m(e, 0.0) <= s.hold_release_position_m
+                && spread_m <= s.hold_release_position_m
+                && !(outside
+                    && spread_m > HOLD_SPREAD_EXIT_M
+                    && self.station.held_s() >= HOLD_SETTLING_S)
                 && centre_m <= HOLD_CENTRE_RELEASE_M
         } else {
             slow(s.hold_enter_speed_m_per_s)
@@ -547,6 +558,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
                 && centre_m <= HOLD_CENTRE_ENTER_M
         };
+        if !was && self.holding {
+            self.station.start();
+        }
         if was && !self.holding {
             // Re-plan from the tables, not from the plan before the hold.
             self.solver.reset();
@@ -558,9 +572,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     /// The hold law: critically damped PD on the group's centre (position)
     /// and mean speed (the one mode a single gradient controls near rest),
-    /// scaled by the duty of the schedule and bounded by a fraction of
-    /// u_max.
-    fn hold_gradient(&self, e: &[f64; NX]) -> f64 {
+    /// about the station-keeping dither (see `station`), which holds the
+    /// capsules' relative position through drag; the PD part is scaled by
+    /// the duty of the schedule and the sum bounded by a fraction of u_max.
+    fn hold_gradient(&mut self, e: &[f64; NX]) -> f64 {
         let (_, mean_v) = capsule_means(e);
         let centre_m = capsule_centre_m(e);
         let mean_g = self.mean_gain;
@@ -568,13 +583,35 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             return 0.0;
         }
         let w = HOLD_NATURAL_FREQUENCY_RAD_PER_S;
-        let period_s = match self.settings.sampling {
-            Sampling::Ideal => S::DT_S,
-            Sampling::Constant | Sampling::Variable => S::DT_S + self.gap_s,
-        };
-        let accel = -(w * w * centre_m + 2.0 * w * mean_v) * period_s / S::DT_S;
+        let gap_s = self.hold_gap_s();
+        let (dither_m, dither_m_per_s) = self.station.common(S::DT_S, gap_s);
+        let mut fastest_m_per_s: f64 = 0.0;
+        for i in 0..NX / 2 {
+            fastest_m_per_s = fastest_m_per_s.max(libm::fabs(e[2 * i + 1] - dither_m_per_s));
+        }
+        let speed_room_m_per_s =
+            STATION_SPEED_BUDGET_M_PER_S - fastest_m_per_s - w * libm::fabs(centre_m - dither_m);
+        let position_room_m =
+            STATION_POSITION_BUDGET_M - half_spread_m(e, 0.0) - libm::fabs(centre_m - dither_m);
+        let dither_accel = self.station.next_acceleration(
+            e,
+            S::DT_S,
+            gap_s,
+            (speed_room_m_per_s, position_room_m),
+        );
+        let centre_accel = -(w * w * (centre_m - dither_m) + 2.0 * w * (mean_v - dither_m_per_s))
+            * (S::DT_S + gap_s)
+            / S::DT_S;
         let bound = HOLD_MAX_GRADIENT_FRACTION * S::U_MAX_T_PER_M;
-        (accel / mean_g).clamp(-bound, bound)
+        ((centre_accel + dither_accel) / mean_g).clamp(-bound, bound)
+    }
+
+    /// The zero-gradient gap after each hold sample, s.
+    fn hold_gap_s(&self) -> f64 {
+        match self.settings.sampling {
+            Sampling::Ideal => 0.0,
+            Sampling::Constant | Sampling::Variable => self.gap_s,
+        }
     }
 
     /// Switching rule along the predicted plan from `e`.

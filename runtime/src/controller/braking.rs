@@ -83,6 +83,15 @@ pub(super) fn capsule_gain_and_drag<S: PlanSolver<NX, K>, const NX: usize, const
     (gain, drag.max(0.0))
 }
 
+/// Drag coefficient b_i of every capsule, 1/m (zero beyond the capsules).
+pub(super) fn capsule_drags<S: PlanSolver<NX, K>, const NX: usize, const K: usize>() -> [f64; NX] {
+    let mut drag = [0.0; NX];
+    for (i, d) in drag.iter_mut().take(NX / 2).enumerate() {
+        *d = capsule_gain_and_drag::<S, NX, K>(i).1;
+    }
+    drag
+}
+
 /// Near rest one gradient moves every capsule alike: it sets where the
 /// group stands but not how the capsules stand relative to each other.
 /// The smallest and largest position error, m, each capsule's motion

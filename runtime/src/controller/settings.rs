@@ -135,6 +135,14 @@ pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 4.0e-3;
 pub const HOLD_RELEASE_POSITION_M: f64 = 1.0e-3;
 /// Default hold release speed, m/s.
 pub const HOLD_RELEASE_SPEED_M_PER_S: f64 = 10.0e-3;
+/// The hold is also left when a capsule is estimated outside the release
+/// distance while the spread is at least this, m: centring can no longer
+/// bring every capsule back with margin, and waiting for the spread to
+/// reach the release distance only spends time outside the band.
+pub const HOLD_SPREAD_EXIT_M: f64 = 0.8e-3;
+/// ... but only after the hold has run this long, s: on arrival the hold
+/// is still centring the group.
+pub const HOLD_SETTLING_S: f64 = 0.5;
 /// How far ahead the hold entry extrapolates the capsules' relative drift, s.
 pub const HOLD_DRIFT_HORIZON_S: f64 = 1.0;
 /// The hold is entered only while the group's centre (midpoint of the

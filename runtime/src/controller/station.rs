@@ -1,0 +1,301 @@
+//! Station keeping in the terminal hold: the capsules' relative position
+//! through drag.
+//!
+//! Near rest one gradient moves every capsule alike, so the hold's PD law
+//! keeps the group's centre but not the capsules' positions relative to one
+//! another, and a disturbance that differs between capsules (a constant
+//! bias of the paper's size gives up to 0.7 mm/s of relative drift) walks
+//! them out of the 1 mm band. What sets capsules apart is drag,
+//! `-b_i v|v|`, which differs between them. A common velocity waveform
+//! with zero mean that is fast one way for a short time and slow the other
+//! way for longer has `mean(v|v|) != 0` and returns to where it started:
+//! capsule i then feels a mean acceleration `-b_i mean(v|v|)`, so the
+//! group's shape changes at a rate set by the waveform's asymmetry, while
+//! its centre does not move. A PID on the relative error along the drag
+//! direction `beta_i = b_i - mean(b)` sets that asymmetry, bounded so that
+//! every speed stays below the settle band's 5 mm/s.
+//!
+//! Authority: with speeds below `V`, `|mean(v|v|)| <= 0.17 V^2` (fast for
+//! 29 % of the time, the best split), so the relative acceleration it can
+//! hold against is at most `(b_1 - b_2) x 0.17 V^2`: 3.3e-4 m/s^2 at
+//! `V` = 4 mm/s for the default capsules, about the relative part of a
+//! random bias of the paper's size (||d|| <= 5e-4 in SI). A larger relative
+//! bias cannot be held inside the band by any law that keeps the speeds
+//! inside it.
+
+/// Dither levels over one pattern, in units of the amplitude (one level per
+/// actuation sample, reached by its end). Zero net displacement for every
+/// gap (the ramps up and down cancel, and the levels weigh 2 x 1 against
+/// 4 x 0.5); fast one third of the time, close to the best split (29 %).
+pub const STATION_PATTERN: [f64; 6] = [1.0, 1.0, -0.5, -0.5, -0.5, -0.5];
+
+/// Largest dither speed, m/s: below the settle band's 5 mm/s, with room for
+/// the centre law's own motion.
+pub const STATION_MAX_SPEED_M_PER_S: f64 = 3.0e-3;
+
+/// Speed budget of the hold, m/s: a pattern starts only with the amplitude
+/// left after the capsules' other motion (their speeds about the dither's
+/// and what the centre law will add), so that the sum stays inside the
+/// settle band's 5 mm/s.
+pub const STATION_SPEED_BUDGET_M_PER_S: f64 = 4.5e-3;
+
+/// Position budget of the hold, m: a pattern starts only with the
+/// amplitude whose wobble keeps every capsule's estimated error within
+/// this (the 1 mm band less the estimate's noise, about 0.1 mm).
+pub const STATION_POSITION_BUDGET_M: f64 = 0.8e-3;
+
+/// Bandwidth of the relative-position loop, rad/s (three poles there).
+pub const STATION_BANDWIDTH_RAD_PER_S: f64 = 1.0;
+
+/// Time constant of the low-pass on the relative rate estimate, s.
+pub const STATION_RATE_FILTER_S: f64 = 0.3;
+
+/// State of the station-keeping dither (part of the controller's memory).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StationKeeper<const NX: usize> {
+    /// Drag direction `beta_i / sum beta^2` per capsule, m (zero: no
+    /// differential drag, the dither is off).
+    direction: [f64; NX],
+    /// Index into [`STATION_PATTERN`] of the next actuation sample.
+    phase: usize,
+    /// Signed amplitude of the current pattern, m/s.
+    amplitude_m_per_s: f64,
+    /// The dither's common velocity now (the model's), m/s.
+    velocity_m_per_s: f64,
+    /// The dither's common displacement now, m.
+    displacement_m: f64,
+    /// Integral of the relative error, m^2 s.
+    integral: f64,
+    /// Low-passed relative rate, m^2/s (NaN: no sample yet).
+    rate: f64,
+    /// Time since the pattern started from rest (hold entry), s.
+    held_s: f64,
+}
+
+impl<const NX: usize> StationKeeper<NX> {
+    /// From the capsules' drag coefficients `drag[i]`, 1/m.
+    pub fn new(drag: &[f64]) -> Self {
+        let m = NX / 2;
+        let mean = drag.iter().take(m).sum::<f64>() / m.max(1) as f64;
+        let mut direction = [0.0; NX];
+        let mut norm2 = 0.0;
+        for i in 0..m {
+            direction[i] = drag[i] - mean;
+            norm2 += direction[i] * direction[i];
+        }
+        // Capsules with (nearly) the same drag cannot be told apart.
+        let distinct = norm2.is_finite() && norm2 > 1e-6 * mean * mean && mean > 0.0;
+        for d in direction.iter_mut() {
+            *d = if distinct { *d / norm2 } else { 0.0 };
+        }
+        StationKeeper {
+            direction,
+            phase: 0,
+            amplitude_m_per_s: 0.0,
+            velocity_m_per_s: 0.0,
+            displacement_m: 0.0,
+            integral: 0.0,
+            rate: f64::NAN,
+            held_s: 0.0,
+        }
+    }
+
+    /// Forgets the learned bias (new target or new start).
+    pub fn forget(&mut self) {
+        self.integral = 0.0;
+        self.start();
+    }
+
+    /// Starts a pattern from rest (hold entry).
+    pub fn start(&mut self) {
+        self.phase = 0;
+        self.amplitude_m_per_s = 0.0;
+        self.velocity_m_per_s = 0.0;
+        self.displacement_m = 0.0;
+        self.rate = f64::NAN;
+        self.held_s = 0.0;
+    }
+
+    /// Time since the hold was entered, s.
+    pub fn held_s(&self) -> f64 {
+        self.held_s
+    }
+
+    /// The dither's common (displacement m, velocity m/s) now, the
+    /// displacement about the pattern's mean position: the centre law
+    /// holds the group about this point, so the wobble is centred on the
+    /// target.
+    pub fn common(&self, dt_s: f64, gap_s: f64) -> (f64, f64) {
+        let mean_m = self.amplitude_m_per_s * pattern_mean_position_s(dt_s, gap_s);
+        (self.displacement_m - mean_m, self.velocity_m_per_s)
+    }
+
+    /// One actuation sample of `dt_s` followed by a zero-gradient gap of
+    /// `gap_s`, from the error `e` (relative to the target): the common
+    /// acceleration the dither asks for during the sample, m/s^2. A new
+    /// pattern's amplitude is at most what `headroom` leaves: (speed, m/s,
+    /// that the capsules' other motion leaves free; distance, m, between
+    /// the capsules' extreme errors and the band's edge), so that the
+    /// dither's own wobble never takes a capsule out of the band.
+    pub fn next_acceleration<const M: usize>(
+        &mut self,
+        e: &[f64; M],
+        dt_s: f64,
+        gap_s: f64,
+        headroom: (f64, f64),
+    ) -> f64 {
+        self.held_s += dt_s + gap_s;
+        let m = M / 2;
+        let (mut xi, mut xi_rate) = (0.0, 0.0);
+        for i in 0..m.min(NX) {
+            xi += self.direction[i] * e[2 * i];
+            xi_rate += self.direction[i] * e[2 * i + 1];
+        }
+        if self.direction.iter().all(|&d| d == 0.0) {
+            return 0.0;
+        }
+        let period_s = dt_s + gap_s;
+        let a = period_s / (STATION_RATE_FILTER_S + period_s);
+        self.rate = if self.rate.is_nan() {
+            xi_rate
+        } else {
+            self.rate + a * (xi_rate - self.rate)
+        };
+        let kappa = pattern_drag_gain(dt_s, gap_s);
+        let limit = kappa * STATION_MAX_SPEED_M_PER_S * STATION_MAX_SPEED_M_PER_S;
+        // xi'' = -mean(v|v|) + bias: three poles at -w.
+        let w = STATION_BANDWIDTH_RAD_PER_S;
+        let pd = 3.0 * w * w * xi + 3.0 * w * self.rate;
+        let wanted = pd + w * w * w * self.integral;
+        // Integrate unless saturated the same way (anti-windup), and never
+        // beyond what the dither can hold.
+        if wanted.abs() < limit || wanted.signum() != xi.signum() {
+            self.integral += xi * period_s;
+        }
+        let cap = limit / (w * w * w);
+        self.integral = self.integral.clamp(-cap, cap);
+        if self.phase == 0 {
+            let wanted = pd + w * w * w * self.integral;
+            let speed = if kappa > 0.0 {
+                libm::sqrt(wanted.abs().min(limit) / kappa)
+            } else {
+                0.0
+            };
+            let (speed_room, position_room_m) = headroom;
+            let wobble_s = pattern_half_extent_s(dt_s, gap_s);
+            let speed = speed
+                .min(speed_room.max(0.0))
+                .min((position_room_m / wobble_s).max(0.0));
+            self.amplitude_m_per_s = speed.copysign(wanted);
+        }
+        let next = STATION_PATTERN[self.phase] * self.amplitude_m_per_s;
+        let accel = (next - self.velocity_m_per_s) / dt_s;
+        self.displacement_m += 0.5 * dt_s * (self.velocity_m_per_s + next) + gap_s * next;
+        self.velocity_m_per_s = next;
+        self.phase = (self.phase + 1) % STATION_PATTERN.len();
+        if self.phase == 0 {
+            // The pattern returns to its start; drop rounding.
+            self.displacement_m = 0.0;
+        }
+        accel
+    }
+}
+
+/// Positions of [`STATION_PATTERN`] at unit amplitude at its sample
+/// instants (the start of each actuation sample), s (m per m/s).
+fn pattern_positions_s(dt_s: f64, gap_s: f64) -> [f64; STATION_PATTERN.len()] {
+    let n = STATION_PATTERN.len();
+    let mut out = [0.0; STATION_PATTERN.len()];
+    let mut x = 0.0;
+    for (k, o) in out.iter_mut().enumerate() {
+        *o = x;
+        let (a, b) = (STATION_PATTERN[(k + n - 1) % n], STATION_PATTERN[k]);
+        x += 0.5 * dt_s * (a + b) + gap_s * b;
+    }
+    out
+}
+
+/// Mean position of [`STATION_PATTERN`] at unit amplitude, s (m per m/s).
+pub fn pattern_mean_position_s(dt_s: f64, gap_s: f64) -> f64 {
+    let p = pattern_positions_s(dt_s, gap_s);
+    p.iter().sum::<f64>() / p.len() as f64
+}
+
+/// Largest distance of [`STATION_PATTERN`]'s positions from their mean at
+/// unit amplitude, s (m per m/s).
+pub fn pattern_half_extent_s(dt_s: f64, gap_s: f64) -> f64 {
+    let mean = pattern_mean_position_s(dt_s, gap_s);
+    pattern_positions_s(dt_s, gap_s)
+        .iter()
+        .fold(0.0, |a: f64, p| a.max(libm::fabs(p - mean)))
+}
+
+/// `mean(v|v|) / V^2` of [`STATION_PATTERN`] at unit amplitude: linear
+/// ramps over each actuation sample of `dt_s`, constant over each gap of
+/// `gap_s`.
+pub fn pattern_drag_gain(dt_s: f64, gap_s: f64) -> f64 {
+    // Antiderivative of v|v|.
+    let h = |v: f64| libm::fabs(v) * v * v / 3.0;
+    let n = STATION_PATTERN.len();
+    let mut sum = 0.0;
+    for k in 0..n {
+        let (a, b) = (STATION_PATTERN[(k + n - 1) % n], STATION_PATTERN[k]);
+        let ramp = if a == b {
+            a * libm::fabs(a)
+        } else {
+            (h(b) - h(a)) / (b - a)
+        };
+        sum += dt_s * ramp + gap_s * b * libm::fabs(b);
+    }
+    let total_s = n as f64 * (dt_s + gap_s);
+    if total_s > 0.0 {
+        sum / total_s
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The pattern returns to its start for any gap, and is fast the way
+    /// its amplitude points.
+    #[test]
+    fn pattern_has_zero_displacement_and_positive_drag_gain() {
+        for (dt, gap) in [(0.02, 0.0), (0.02, 0.02), (0.02, 0.05)] {
+            let n = STATION_PATTERN.len();
+            let mut x = 0.0;
+            for k in 0..n {
+                let (a, b) = (STATION_PATTERN[(k + n - 1) % n], STATION_PATTERN[k]);
+                x += 0.5 * dt * (a + b) + gap * b;
+            }
+            assert!(x.abs() < 1e-15, "displacement {x}");
+            let kappa = pattern_drag_gain(dt, gap);
+            assert!(kappa > 0.09 && kappa < 0.172, "kappa {kappa}");
+        }
+    }
+
+    /// Two capsules, the first with more drag: a relative error with the
+    /// first ahead asks for the fast phase forward (more drag on it, so it
+    /// falls back), and the dither's displacement returns to zero.
+    #[test]
+    fn relative_error_sets_the_asymmetry() {
+        let mut s = StationKeeper::<4>::new(&[134.7, 16.8]);
+        let e = [0.5e-3, 0.0, -0.5e-3, 0.0];
+        let mut v_abs_v = 0.0;
+        let mut v_max: f64 = 0.0;
+        for _ in 0..STATION_PATTERN.len() {
+            let v0 = s.common(0.02, 0.02).1;
+            s.next_acceleration(&e, 0.02, 0.02, (1.0, 1.0));
+            let v1 = s.common(0.02, 0.02).1;
+            v_abs_v += v1 * v1.abs() + v0 * v0.abs();
+            v_max = v_max.max(v1.abs());
+        }
+        assert!(v_abs_v > 0.0);
+        assert!(v_max <= STATION_MAX_SPEED_M_PER_S + 1e-12);
+        assert!(s.displacement_m.abs() < 1e-15);
+        let mut same = StationKeeper::<4>::new(&[16.8, 16.8]);
+        assert_eq!(same.next_acceleration(&e, 0.02, 0.02, (1.0, 1.0)), 0.0);
+    }
+}
