@@ -159,8 +159,9 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     gap_s: f64,
     /// The hold's relative-position law (see `station`).
     station: StationKeeper<NX>,
-    /// End-game progress (see `Controller::stalled`): the smallest largest
-    /// position error since the last progress, m, and the time since, s.
+    /// End-game progress (see `Controller::stalled`): the best (smallest)
+    /// largest error since the last progress, m, and the actuation time
+    /// since, s.
     stall_best_m: f64,
     stall_clock_s: f64,
 }

@@ -7,7 +7,9 @@
 //! estimate (positions only: velocities are estimated), predicts through
 //! the delay, refines its plan with the generated fixed-size solver, and
 //! decides with the switching rule how many samples to actuate before the
-//! next tracking phase.
+//! next tracking phase. Near the target a terminal hold takes over: a
+//! centre law for the group and a station-keeping dither that holds the
+//! capsules' relative position through their different drag.
 //!
 //! `#![no_std]`, no heap, no `unsafe`: all memory lives in [`Controller`].
 
