@@ -371,12 +371,12 @@ fn certified_operation_bound_covers_the_bench_states() {
 
 /// The explicit tier alone in the closed loop, as measured (README "Two
 /// tiers"): ideal sampling, no disturbance. On the sparse index (each kept
-/// cell's sample chosen among the samples of its neighbourhood) A no
-/// longer settles: it reaches the band at 0.70 s, then the end game cycles
-/// through stored samples (speeds up to 0.15 m/s, 0.75 mm off at 3 s;
-/// with the dense index it settled at 0.89 s). C ends 1.43 mm off (1.2 mm
-/// before). Asserted: the measured values with a small margin, no
-/// refinement ran, and the refinement still settles A.
+/// cell's sample chosen among the samples of its neighbourhood) A's end
+/// game cycled through stored samples (speeds up to 0.15 m/s, 0.75 mm off
+/// at 3 s) until the shortest main-grid plans were finished with one
+/// sample: it now settles in 0.709 s (0.89 s on the dense index). C ends
+/// 1.93 mm off (1.43 mm before). Asserted: the measured values with a
+/// small margin, no refinement ran, and the refinement still settles A.
 #[test]
 fn explicit_tier_alone_closed_loop_as_measured() {
     use capsule_mpc_generator::config::RefineMode;
@@ -393,6 +393,11 @@ fn explicit_tier_alone_closed_loop_as_measured() {
         .first_in_band_s
         .expect("A reaches the band with the explicit tier alone");
     assert!(first <= 0.75, "A reached the band at {first} s");
+    let settle = a
+        .metrics
+        .settle_time_s
+        .expect("A settles with the explicit tier alone");
+    assert!(settle <= 0.75, "A settled at {settle} s");
     assert!(
         a.metrics.final_position_error_m < 1e-3,
         "A ends {} m off",
@@ -402,7 +407,7 @@ fn explicit_tier_alone_closed_loop_as_measured() {
     assert_eq!(tiers.refined, 0, "refine none ran the refinement");
     let c = run_with(Scenario::C, RefineMode::None);
     assert!(
-        c.metrics.final_position_error_m < 2e-3,
+        c.metrics.final_position_error_m < 2.5e-3,
         "C ends {} m off",
         c.metrics.final_position_error_m
     );

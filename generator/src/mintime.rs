@@ -484,7 +484,8 @@ pub const FINISH_BAND: Band = Band {
 pub const FINISH_SAMPLES: usize = 2;
 
 /// The minimum-time inputs `arrived` (length T), padded with
-/// [`FINISH_SAMPLES`] zero samples and re-solved over T + FINISH_SAMPLES
+/// `finish_samples` zero samples (usually [`FINISH_SAMPLES`]) and
+/// re-solved over the longer horizon
 /// toward [`FINISH_BAND`]; the padded inputs when that does not end nearer
 /// rest, `arrived` itself when it does not fit in `max_samples`.
 pub fn finish_at_rest(
@@ -493,8 +494,9 @@ pub fn finish_at_rest(
     arrived: &MinTimePlan,
     max_samples: usize,
     sqp_iterations: usize,
+    finish_samples: usize,
 ) -> Vec<f64> {
-    let t = arrived.samples + FINISH_SAMPLES;
+    let t = arrived.samples + finish_samples;
     if arrived.samples == 0 || t > max_samples {
         return arrived.u.clone();
     }
