@@ -17,11 +17,12 @@
 //!
 //! Authority: with speeds below `V`, `|mean(v|v|)| <= 0.17 V^2` (fast for
 //! 29 % of the time, the best split), so the relative acceleration it can
-//! hold against is at most `(b_1 - b_2) x 0.17 V^2`: 3.3e-4 m/s^2 at
-//! `V` = 4 mm/s for the default capsules, about the relative part of a
-//! random bias of the paper's size (||d|| <= 5e-4 in SI). A larger relative
-//! bias cannot be held inside the band by any law that keeps the speeds
-//! inside it.
+//! hold against is at most `(b_1 - b_2) x 0.17 V^2`: 5e-4 m/s^2 at the
+//! band's 5 mm/s for the default capsules, 1.1-1.6e-4 m/s^2 with this
+//! pattern at its 3 mm/s, against up to 7e-4 m/s^2 for the relative part
+//! of a constant bias of the paper's size (||d|| <= 5e-4 in SI). A larger
+//! relative bias cannot be held inside the band by any law that keeps the
+//! speeds inside it.
 
 /// Dither levels over one pattern, in units of the amplitude (one level per
 /// actuation sample, reached by its end). Zero net displacement for every
