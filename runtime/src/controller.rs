@@ -257,8 +257,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.last_cost = f64::INFINITY;
         self.holding = false;
         self.station.forget();
-        self.stall_best_m = f64::INFINITY;
-        self.stall_clock_s = 0.0;
+        self.forget_stall();
         self.planned_phase_samples = self.settings.max_actuation_samples;
         self.update_schedule();
     }
@@ -582,6 +581,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         };
         if !was && self.holding {
             self.station.start();
+            // The end game's progress restarts when the hold ends.
+            self.forget_stall();
         }
         if was && !self.holding {
             // Re-plan from the tables, not from the plan before the hold.
@@ -647,8 +648,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             moving |= speed > REST_SPEED_M_PER_S;
         }
         if largest_m > STALL_REGION_M || !moving {
-            self.stall_best_m = f64::INFINITY;
-            self.stall_clock_s = 0.0;
+            self.forget_stall();
             return false;
         }
         if largest_m < STALL_PROGRESS * self.stall_best_m {
@@ -660,9 +660,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         if self.stall_clock_s < STALL_S {
             return false;
         }
+        self.forget_stall();
+        true
+    }
+
+    fn forget_stall(&mut self) {
         self.stall_best_m = f64::INFINITY;
         self.stall_clock_s = 0.0;
-        true
     }
 
     /// The zero-gradient gap after each hold sample, s.

@@ -54,8 +54,8 @@ pub const STATION_RATE_FILTER_S: f64 = 0.3;
 /// State of the station-keeping dither (part of the controller's memory).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StationKeeper<const NX: usize> {
-    /// Drag direction `beta_i / sum beta^2` per capsule, m (zero: no
-    /// differential drag, the dither is off).
+    /// Drag direction `beta_i / sum beta^2` per capsule (the first NX / 2
+    /// entries), m (zero: no differential drag, the dither is off).
     direction: [f64; NX],
     /// Index into [`STATION_PATTERN`] of the next actuation sample.
     phase: usize,
@@ -138,17 +138,16 @@ impl<const NX: usize> StationKeeper<NX> {
     /// that the capsules' other motion leaves free; distance, m, between
     /// the capsules' extreme errors and the band's edge), so that the
     /// dither's own wobble never takes a capsule out of the band.
-    pub fn next_acceleration<const M: usize>(
+    pub fn next_acceleration(
         &mut self,
-        e: &[f64; M],
+        e: &[f64; NX],
         dt_s: f64,
         gap_s: f64,
         headroom: (f64, f64),
     ) -> f64 {
         self.held_s += dt_s + gap_s;
-        let m = M / 2;
         let (mut xi, mut xi_rate) = (0.0, 0.0);
-        for i in 0..m.min(NX) {
+        for i in 0..NX / 2 {
             xi += self.direction[i] * e[2 * i];
             xi_rate += self.direction[i] * e[2 * i + 1];
         }
