@@ -11,7 +11,9 @@ use capsule_mpc_generator::explicit::{
     build_explicit, dense_hessian, reference_box_qp, ExplicitTables, PlanSource,
 };
 use capsule_mpc_generator::tables::Tables;
-use capsule_mpc_runtime::generated::controller::{explicit, explicit_tables, solver, spec, tables};
+use capsule_mpc_runtime::generated::controller::{
+    explicit, explicit_tables, lookup, qp, solver, spec, tables,
+};
 use capsule_mpc_runtime::generated::{SolveStatus, Tier};
 use rand::{Rng, SeedableRng};
 use std::path::Path;
@@ -106,7 +108,7 @@ fn explicit_lookup_matches_a_reference_over_the_kept_cells() {
             e[1] = 0.02; // off the fine grid's rest test
         }
         let idx: Option<Vec<usize>> = (0..spec::NX)
-            .map(|j| solver::axis_nearest(&axis(j), e[j]))
+            .map(|j| lookup::axis_nearest(&axis(j), e[j]))
             .collect();
         let got = explicit::explicit_slot(&e, coasted, usize::MAX);
         let Some(idx) = idx else {
@@ -176,7 +178,7 @@ fn explicit_lookup_matches_a_reference_over_the_kept_cells() {
 fn explicit_plan_matches_clarabel_on_the_stored_qp() {
     let g = generator_explicit();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(15);
-    let mut qp = solver::BoxQp::new();
+    let mut qp = qp::BoxQp::new();
     let mut plan = [0.0; spec::K];
     let (mut checked, mut worst) = (0, 0.0_f64);
     for _ in 0..400 {

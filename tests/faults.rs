@@ -11,6 +11,7 @@ use capsule_mpc_runtime::controller::{
     braking_gradient, ControllerSettings, Sampling, SwitchingRule, BRAKING_HORIZON_S,
     MAX_ABS_SPEED_M_PER_S, REACQUIRE_AFTER_REJECTIONS,
 };
+use capsule_mpc_runtime::generated::controller::lookup;
 use capsule_mpc_runtime::generated::controller::solver::{self, Schedule, Solver};
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
 use capsule_mpc_runtime::generated::{PlanSolver, SolveStatus};
@@ -464,7 +465,7 @@ fn solve_above_the_offline_iteration_map_is_flagged() {
         let mut c = proto.clone();
         let out = c.cycle_full_state(&e).unwrap();
         let report = out.solve.expect("a solve report");
-        let measured = solver::qp_iterations_measured(&e);
+        let measured = lookup::qp_iterations_measured(&e);
         let above = measured > 0 && report.max_qp_iterations > measured;
         // The flag is exactly "above the map" (when nothing else is wrong).
         if report.status == SolveStatus::Refined {
@@ -523,7 +524,7 @@ fn iteration_limit_is_flagged_with_a_finite_bounded_plan() {
     assert!(out.gradients_t_per_m.iter().any(|&u| u != 0.0));
     // ... and it is no worse than the stored plan the solve started from.
     let mut table = [0.0; K];
-    solver::lookup_tail(&e, &mut table).expect("state inside the index");
+    lookup::lookup_tail(&e, &mut table).expect("state inside the index");
     let table_cost = solver::rollout_cost(&e, &table, &Schedule::BACK_TO_BACK);
     assert!(report.cost <= table_cost, "{} > {table_cost}", report.cost);
 

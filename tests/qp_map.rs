@@ -4,7 +4,7 @@
 //! map is a maximum over exactly these solves), and the map's cell layout
 //! is the solver's own index layout.
 
-use capsule_mpc_runtime::generated::controller::{solver, tables};
+use capsule_mpc_runtime::generated::controller::{lookup, solver, tables};
 use capsule_mpc_runtime::generated::{qp_iteration_map, SolveStatus};
 use capsule_mpc_sim::qp_map::{cell_centre, schedules};
 
@@ -15,7 +15,7 @@ fn cold_solves_at_cell_centres_stay_within_the_map() {
     // Every 5th cell: a spread over the whole index, under a second.
     for c in (0..tables::INDEX.len()).step_by(5) {
         let e = cell_centre(c);
-        assert_eq!(solver::index_cell(&e), Some(c), "cell {c}: centre {e:?}");
+        assert_eq!(lookup::index_cell(&e), Some(c), "cell {c}: centre {e:?}");
         for (samples, coast) in schedules() {
             let mut s = solver::Solver::new();
             s.set_schedule(samples, coast);
@@ -23,7 +23,7 @@ fn cold_solves_at_cell_centres_stay_within_the_map() {
             if r.status == SolveStatus::OutOfRange {
                 continue;
             }
-            let map = solver::qp_iterations_measured(&e);
+            let map = lookup::qp_iterations_measured(&e);
             assert!(
                 r.max_qp_iterations <= map,
                 "cell {c}, schedule ({samples}, {coast}): {} iterations, map {map}",

@@ -219,6 +219,493 @@ pub mod explicit_tables {
     /// worst (all variables free, the factor rebuilt).
     pub const EXPLICIT_CERTIFIED_OPS: u64 = 36822u64;
 }
+pub mod qp {
+    //! The window QP's engine: a dense box-constrained QP solved by a primal
+    //! active-set method, and the clamp of a gradient to the amplitude limit.
+    //! Shared by the refinement (`solver`) and the explicit tier (`explicit`).
+    use super::spec::*;
+    /// Dense box-constrained QP `min 1/2 x'Hx + g'x, lo <= x <= hi` (lo <= 0 <= hi),
+    /// solved by a primal active-set method from x = 0.
+    #[derive(Debug, Clone)]
+    pub struct BoxQp {
+        pub h: [[f64; N]; N],
+        pub g: [f64; N],
+        pub lo: [f64; N],
+        pub hi: [f64; N],
+        pub x: [f64; N],
+        /// -1 at lower bound, +1 at upper bound, 0 free.
+        pub active: [i8; N],
+        chol: [[f64; N]; N],
+        /// 1 / chol[r][r]: the substitutions multiply instead of divide.
+        inv_diag: [f64; N],
+        /// Leading rows of `chol` still valid for the current free set: rows
+        /// above the first changed free position depend only on the leading
+        /// block of H, so they are kept.
+        factored: usize,
+        rhs: [f64; N],
+        newton: [f64; N],
+        free: [usize; N],
+    }
+    impl Default for BoxQp {
+        fn default() -> Self {
+            BoxQp::new()
+        }
+    }
+    impl BoxQp {
+        pub const fn new() -> BoxQp {
+            BoxQp {
+                h: [[0.0; N]; N],
+                g: [0.0; N],
+                lo: [0.0; N],
+                hi: [0.0; N],
+                x: [0.0; N],
+                active: [0; N],
+                chol: [[0.0; N]; N],
+                inv_diag: [0.0; N],
+                factored: 0,
+                rhs: [0.0; N],
+                newton: [0.0; N],
+                free: [0; N],
+            }
+        }
+        /// Returns (iterations, converged). On the iteration bound, `x` is the
+        /// last feasible iterate (always within the box).
+        pub fn solve(&mut self) -> (u32, bool) {
+            self.solve_from(&[0; N])
+        }
+        /// As `solve`, warm-started from the active set `active` (-1 lower,
+        /// +1 upper, 0 free): the start puts active variables on their bounds
+        /// and free ones at 0, which is feasible since lo <= 0 <= hi.
+        pub fn solve_from(&mut self, active: &[i8; N]) -> (u32, bool) {
+            let mut j = 0;
+            while j < N {
+                let a = active[j];
+                self.active[j] = if a > 0 { 1 } else if a < 0 { -1 } else { 0 };
+                self.x[j] = if a > 0 {
+                    self.hi[j]
+                } else if a < 0 {
+                    self.lo[j]
+                } else {
+                    0.0
+                };
+                j += 1;
+            }
+            self.factored = 0;
+            let mut iter = 0u32;
+            while (iter as usize) < QP_MAX_ITERATIONS {
+                iter += 1;
+                let nf = self.collect_free();
+                if nf > 0 && !self.factor_free(nf) {
+                    return (iter, false);
+                }
+                self.factored = nf;
+                self.free_newton_point(nf);
+                let mut t = 1.0;
+                let mut blocking = usize::MAX;
+                let mut f = 0;
+                while f < nf {
+                    let j = self.free[f];
+                    let d = self.newton[j] - self.x[j];
+                    if d > 0.0 && self.x[j] + d > self.hi[j] {
+                        let tj = (self.hi[j] - self.x[j]) / d;
+                        if tj < t {
+                            t = tj;
+                            blocking = j;
+                        }
+                    } else if d < 0.0 && self.x[j] + d < self.lo[j] {
+                        let tj = (self.lo[j] - self.x[j]) / d;
+                        if tj < t {
+                            t = tj;
+                            blocking = j;
+                        }
+                    }
+                    f += 1;
+                }
+                let mut f = 0;
+                while f < nf {
+                    let j = self.free[f];
+                    self.x[j] += t * (self.newton[j] - self.x[j]);
+                    f += 1;
+                }
+                if blocking != usize::MAX {
+                    let up = self.newton[blocking] > self.x[blocking];
+                    self.x[blocking] = if up {
+                        self.hi[blocking]
+                    } else {
+                        self.lo[blocking]
+                    };
+                    self.active[blocking] = if up { 1 } else { -1 };
+                    self.keep_rows_before(blocking);
+                    continue;
+                }
+                let mut worst = 0.0;
+                let mut release = usize::MAX;
+                let mut j = 0;
+                while j < N {
+                    if self.active[j] != 0 {
+                        let mut grad = self.g[j];
+                        let mut c = 0;
+                        while c < N {
+                            grad += self.h[j][c] * self.x[c];
+                            c += 1;
+                        }
+                        let wrong = if self.active[j] > 0 { grad } else { -grad };
+                        if wrong > worst + QP_MULTIPLIER_TOLERANCE {
+                            worst = wrong;
+                            release = j;
+                        }
+                    }
+                    j += 1;
+                }
+                if release == usize::MAX {
+                    return (iter, true);
+                }
+                self.active[release] = 0;
+                self.keep_rows_before(release);
+            }
+            (iter, false)
+        }
+        /// Variable `j` joined or left the free set: Cholesky rows from its
+        /// position in the (index-ordered) free list on must be recomputed.
+        fn keep_rows_before(&mut self, j: usize) {
+            let mut p = 0;
+            let mut c = 0;
+            while c < j {
+                if self.active[c] == 0 {
+                    p += 1;
+                }
+                c += 1;
+            }
+            if p < self.factored {
+                self.factored = p;
+            }
+        }
+        fn collect_free(&mut self) -> usize {
+            let mut nf = 0;
+            let mut j = 0;
+            while j < N {
+                if self.active[j] == 0 {
+                    self.free[nf] = j;
+                    nf += 1;
+                }
+                j += 1;
+            }
+            nf
+        }
+        /// Cholesky of H restricted to the free set; false if not positive definite.
+        fn factor_free(&mut self, nf: usize) -> bool {
+            let mut r = self.factored;
+            while r < nf {
+                let mut c = 0;
+                while c <= r {
+                    let mut s = self.h[self.free[r]][self.free[c]];
+                    let mut k = 0;
+                    while k < c {
+                        s -= self.chol[r][k] * self.chol[c][k];
+                        k += 1;
+                    }
+                    if r == c {
+                        if s <= 0.0 || s.is_nan() {
+                            return false;
+                        }
+                        self.chol[r][r] = libm::sqrt(s);
+                        self.inv_diag[r] = 1.0 / self.chol[r][r];
+                    } else {
+                        self.chol[r][c] = s * self.inv_diag[c];
+                    }
+                    c += 1;
+                }
+                r += 1;
+            }
+            true
+        }
+        /// newton = minimizer over the free variables with active ones at their bounds.
+        fn free_newton_point(&mut self, nf: usize) {
+            let mut j = 0;
+            while j < N {
+                self.newton[j] = self.x[j];
+                j += 1;
+            }
+            let mut r = 0;
+            while r < nf {
+                let row = self.free[r];
+                let mut s = -self.g[row];
+                let mut c = 0;
+                while c < N {
+                    if self.active[c] != 0 {
+                        s -= self.h[row][c] * self.x[c];
+                    }
+                    c += 1;
+                }
+                self.rhs[r] = s;
+                r += 1;
+            }
+            let mut r = 0;
+            while r < nf {
+                let mut s = self.rhs[r];
+                let mut k = 0;
+                while k < r {
+                    s -= self.chol[r][k] * self.rhs[k];
+                    k += 1;
+                }
+                self.rhs[r] = s * self.inv_diag[r];
+                r += 1;
+            }
+            let mut r = nf;
+            while r > 0 {
+                r -= 1;
+                let mut s = self.rhs[r];
+                let mut k = r + 1;
+                while k < nf {
+                    s -= self.chol[k][r] * self.rhs[k];
+                    k += 1;
+                }
+                self.rhs[r] = s * self.inv_diag[r];
+            }
+            let mut r = 0;
+            while r < nf {
+                self.newton[self.free[r]] = self.rhs[r];
+                r += 1;
+            }
+        }
+    }
+    pub fn clamp_u(u: f64) -> f64 {
+        if u > U_MAX_T_PER_M {
+            U_MAX_T_PER_M
+        } else if u < -U_MAX_T_PER_M {
+            -U_MAX_T_PER_M
+        } else {
+            u
+        }
+    }
+}
+pub mod lookup {
+    //! Table lookups: the warm-start index (dense cell numbers, the sparse
+    //! index's kept cells by bisection), the fine end-game plans at rest, the
+    //! chained legs and the stored plan tails. Shared by the refinement
+    //! (`solver`) and the explicit tier (`explicit`).
+    use super::spec::*;
+    use super::tables::*;
+    use crate::Leg;
+    pub fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
+        let f = (v - axis.start) / axis.step;
+        if !(f > -0.5 && f < axis.count as f64 - 0.5) {
+            return None;
+        }
+        Some(libm::round(f) as usize)
+    }
+    /// Bisection probes that find any cell among `INDEX_CELLS` (2^64 > any count).
+    const INDEX_PROBES: usize = 64;
+    /// The row-major number of `e`'s cell on the (dense) warm-start index grid
+    /// (position, speed axes alternating, the last axis fastest); None outside
+    /// the grid.
+    pub fn index_flat(e: &[f64; NX]) -> Option<u64> {
+        let mut flat = 0u64;
+        let mut j = 0;
+        while j < NX {
+            let axis = if j % 2 == 0 { &INDEX_POSITION_AXIS } else { &INDEX_SPEED_AXIS };
+            flat = flat * axis.count as u64 + axis_nearest(axis, e[j])? as u64;
+            j += 1;
+        }
+        Some(flat)
+    }
+    /// The first position in `INDEX_CELLS[lo..hi]` whose cell number is not
+    /// below `flat` (`hi` if none), by bisection: `INDEX_PROBES` probes at most.
+    pub fn index_lower_bound(flat: u64, lo: usize, hi: usize) -> usize {
+        let (mut lo, mut hi) = (
+            lo,
+            if hi < INDEX_CELLS.len() { hi } else { INDEX_CELLS.len() },
+        );
+        let mut probes = 0;
+        while lo < hi && probes < INDEX_PROBES {
+            let mid = lo + (hi - lo) / 2;
+            if INDEX_CELLS[mid] < flat {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+            probes += 1;
+        }
+        lo
+    }
+    /// The slot among the kept cells of the sparse warm-start index
+    /// (`INDEX_CELLS`) of the cell numbered `flat` (see `index_flat`); None
+    /// when no stored plan passes near that cell (it is not kept).
+    pub fn kept_slot(flat: u64) -> Option<usize> {
+        let lo = index_lower_bound(flat, 0, INDEX_CELLS.len());
+        if lo < INDEX_CELLS.len() && INDEX_CELLS[lo] == flat { Some(lo) } else { None }
+    }
+    /// The slot of `e`'s cell among the kept cells of the sparse warm-start
+    /// index (`INDEX_CELLS`); None outside the index grid or in a cell no
+    /// stored plan passes near.
+    pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
+        kept_slot(index_flat(e)?)
+    }
+    /// Most QP iterations measured offline in the index cell of `e` (0: not
+    /// measured, or outside the index).
+    pub fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
+        match index_cell(e) {
+            Some(c) if c < QP_ITERATION_MAP.len() => QP_ITERATION_MAP[c] as u32,
+            _ => 0,
+        }
+    }
+    /// Speed below which a state counts as at rest for the fine plans, m/s.
+    pub const FINE_REST_SPEED_M_PER_S: f64 = 5.0e-3;
+    /// The fine grid point nearest relative state `e` when every speed is
+    /// below `FINE_REST_SPEED_M_PER_S` and every position on the fine grid;
+    /// None otherwise.
+    pub fn fine_cell(e: &[f64; NX]) -> Option<usize> {
+        fine_cell_reaching(e, 0.0)
+    }
+    /// As `fine_cell`, but a position off the fine grid within `reach_m` of
+    /// the target takes the grid's nearest edge.
+    fn fine_cell_reaching(e: &[f64; NX], reach_m: f64) -> Option<usize> {
+        if FINE_COUNT == 0 {
+            return None;
+        }
+        let mut flat = 0usize;
+        let mut i = 0;
+        while i < M {
+            if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S) {
+                return None;
+            }
+            let p = e[2 * i];
+            let j = match axis_nearest(&FINE_AXIS, p) {
+                Some(j) => j,
+                None if libm::fabs(p) <= reach_m => {
+                    if p < FINE_AXIS.start { 0 } else { FINE_AXIS.count - 1 }
+                }
+                None => return None,
+            };
+            flat = flat * FINE_AXIS.count + j;
+            i += 1;
+        }
+        if flat >= FINE_COUNT {
+            return None;
+        }
+        Some(flat)
+    }
+    /// Fills `out` with the fine plan from rest nearest relative state `e`
+    /// (see `fine_cell`); None off the fine grid, or where it has no plan.
+    ///
+    /// Positions beyond the fine grid but within half a main grid step of the
+    /// target, where the main grid's nearest plan is the target's own, empty
+    /// one, take the grid's edge (for three capsules: fine grid +-2 mm, main
+    /// step 1 cm; at rest 2.8 mm off, the refinement from the empty plan
+    /// played zero gradient for 2.3 s). That edge plan is a rest-to-rest leg
+    /// into the fine grid (legs compose exactly: the dynamics do not depend on
+    /// position); the refinement and the next fine plan finish the move.
+    pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
+        let flat = fine_cell_reaching(e, 0.5 * PLAN_AXIS.step)?;
+        if !FINE_REACHED[flat] {
+            return None;
+        }
+        *out = if coasted { COASTED_FINE_PLAN_U[flat] } else { FINE_PLAN_U[flat] };
+        Some(())
+    }
+    /// The leg lattice cell of displacement `d = x_start - x_target` (positions;
+    /// speeds ignored); None outside the lattice.
+    fn leg_cell(d: &[f64; NX]) -> Option<usize> {
+        let mut flat = 0usize;
+        let mut i = 0;
+        while i < M {
+            flat = flat * LEG_AXIS.count + axis_nearest(&LEG_AXIS, d[2 * i])?;
+            i += 1;
+        }
+        Some(flat)
+    }
+    /// The first leg from rest at displacement `d = x_start - x_target` toward
+    /// the target (see `Leg`); None where no chain of stored plans gets there.
+    /// Without tables every displacement is one direct leg.
+    pub fn first_leg(d: &[f64; NX]) -> Option<Leg<NX>> {
+        let mut direct = Leg {
+            start_offset_m: [0.0; NX],
+            last: true,
+        };
+        let mut i = 0;
+        while i < M {
+            direct.start_offset_m[2 * i] = d[2 * i];
+            i += 1;
+        }
+        if !USE_TABLES {
+            return Some(direct);
+        }
+        let cell = leg_cell(d)?;
+        if CHAIN_TIME_S[cell] == 0.0 {
+            return Some(direct);
+        }
+        let plan = FIRST_LEG[cell] as usize;
+        if plan >= PLAN_COUNT {
+            return None;
+        }
+        let mut leg = Leg {
+            start_offset_m: [0.0; NX],
+            last: true,
+        };
+        let (mut rest_plan, mut rest_cell) = (plan, cell);
+        let mut i = M;
+        while i > 0 {
+            i -= 1;
+            let offset = PLAN_AXIS.start
+                + (rest_plan % PLAN_AXIS.count) as f64 * PLAN_AXIS.step;
+            let lattice = LEG_AXIS.start
+                + (rest_cell % LEG_AXIS.count) as f64 * LEG_AXIS.step;
+            leg.start_offset_m[2 * i] = offset;
+            if libm::fabs(offset - lattice) > 0.5 * LEG_AXIS.step {
+                leg.last = false;
+            }
+            rest_plan /= PLAN_AXIS.count;
+            rest_cell /= LEG_AXIS.count;
+        }
+        if leg.last {
+            return Some(direct);
+        }
+        Some(leg)
+    }
+    /// Summed minimum rest-to-rest time (s) of the chain of stored plans from
+    /// displacement `d` (nearest lattice point); infinite without a chain or
+    /// without tables.
+    pub fn chain_time_s(d: &[f64; NX]) -> f64 {
+        if !USE_TABLES {
+            return f64::INFINITY;
+        }
+        match leg_cell(d) {
+            Some(cell) => CHAIN_TIME_S[cell],
+            None => f64::INFINITY,
+        }
+    }
+    /// Fills `out` with the stored plan tail for relative state `e` from the
+    /// back-to-back tables; None when `e` is outside the index or its cell has
+    /// no plan.
+    pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
+        lookup_tail_for(e, out, false)
+    }
+    /// As `lookup_tail`, from the tables solved for one sample per actuation
+    /// phase followed by the coast `COAST_S` (constant sampling) when `coasted`.
+    pub fn lookup_tail_for(
+        e: &[f64; NX],
+        out: &mut [f64; K],
+        coasted: bool,
+    ) -> Option<()> {
+        let flat = index_cell(e)?;
+        let (cell, plans) = if coasted {
+            (COASTED_INDEX[flat], &COASTED_PLAN_U)
+        } else {
+            (INDEX[flat], &PLAN_U)
+        };
+        let plan = (cell >> 16) as usize;
+        let offset = (cell & 0xffff) as usize;
+        if plan >= PLAN_COUNT {
+            return None;
+        }
+        let mut i = 0;
+        while i < K {
+            out[i] = if offset + i < K { plans[plan][offset + i] } else { 0.0 };
+            i += 1;
+        }
+        Some(())
+    }
+}
 pub mod solver {
     //! Fixed-size online solver: refines a long plan with Gauss-Newton SQP steps
     //! on a window of N inputs, the tail's cost-to-go as terminal cost.
@@ -230,6 +717,8 @@ pub mod solver {
     //! backwards to step N, condense the window into an N x N box-constrained QP,
     //! solve it with a primal active-set method, and accept the step only if the
     //! true nonlinear cost decreases. No heap, no recursion, fixed loop bounds.
+    use super::lookup::*;
+    use super::qp::*;
     use super::spec::*;
     use super::tables::*;
     use crate::{Leg, PlanSolver, SolveReport, SolveStatus, Tier};
@@ -726,478 +1215,6 @@ pub mod solver {
             }
         }
     }
-    /// Dense box-constrained QP `min 1/2 x'Hx + g'x, lo <= x <= hi` (lo <= 0 <= hi),
-    /// solved by a primal active-set method from x = 0.
-    #[derive(Debug, Clone)]
-    pub struct BoxQp {
-        pub h: [[f64; N]; N],
-        pub g: [f64; N],
-        pub lo: [f64; N],
-        pub hi: [f64; N],
-        pub x: [f64; N],
-        /// -1 at lower bound, +1 at upper bound, 0 free.
-        active: [i8; N],
-        chol: [[f64; N]; N],
-        /// 1 / chol[r][r]: the substitutions multiply instead of divide.
-        inv_diag: [f64; N],
-        /// Leading rows of `chol` still valid for the current free set: rows
-        /// above the first changed free position depend only on the leading
-        /// block of H, so they are kept.
-        factored: usize,
-        rhs: [f64; N],
-        newton: [f64; N],
-        free: [usize; N],
-    }
-    impl Default for BoxQp {
-        fn default() -> Self {
-            BoxQp::new()
-        }
-    }
-    impl BoxQp {
-        pub const fn new() -> BoxQp {
-            BoxQp {
-                h: [[0.0; N]; N],
-                g: [0.0; N],
-                lo: [0.0; N],
-                hi: [0.0; N],
-                x: [0.0; N],
-                active: [0; N],
-                chol: [[0.0; N]; N],
-                inv_diag: [0.0; N],
-                factored: 0,
-                rhs: [0.0; N],
-                newton: [0.0; N],
-                free: [0; N],
-            }
-        }
-        /// Returns (iterations, converged). On the iteration bound, `x` is the
-        /// last feasible iterate (always within the box).
-        pub fn solve(&mut self) -> (u32, bool) {
-            self.solve_from(&[0; N])
-        }
-        /// As `solve`, warm-started from the active set `active` (-1 lower,
-        /// +1 upper, 0 free): the start puts active variables on their bounds
-        /// and free ones at 0, which is feasible since lo <= 0 <= hi.
-        pub fn solve_from(&mut self, active: &[i8; N]) -> (u32, bool) {
-            let mut j = 0;
-            while j < N {
-                let a = active[j];
-                self.active[j] = if a > 0 { 1 } else if a < 0 { -1 } else { 0 };
-                self.x[j] = if a > 0 {
-                    self.hi[j]
-                } else if a < 0 {
-                    self.lo[j]
-                } else {
-                    0.0
-                };
-                j += 1;
-            }
-            self.factored = 0;
-            let mut iter = 0u32;
-            while (iter as usize) < QP_MAX_ITERATIONS {
-                iter += 1;
-                let nf = self.collect_free();
-                if nf > 0 && !self.factor_free(nf) {
-                    return (iter, false);
-                }
-                self.factored = nf;
-                self.free_newton_point(nf);
-                let mut t = 1.0;
-                let mut blocking = usize::MAX;
-                let mut f = 0;
-                while f < nf {
-                    let j = self.free[f];
-                    let d = self.newton[j] - self.x[j];
-                    if d > 0.0 && self.x[j] + d > self.hi[j] {
-                        let tj = (self.hi[j] - self.x[j]) / d;
-                        if tj < t {
-                            t = tj;
-                            blocking = j;
-                        }
-                    } else if d < 0.0 && self.x[j] + d < self.lo[j] {
-                        let tj = (self.lo[j] - self.x[j]) / d;
-                        if tj < t {
-                            t = tj;
-                            blocking = j;
-                        }
-                    }
-                    f += 1;
-                }
-                let mut f = 0;
-                while f < nf {
-                    let j = self.free[f];
-                    self.x[j] += t * (self.newton[j] - self.x[j]);
-                    f += 1;
-                }
-                if blocking != usize::MAX {
-                    let up = self.newton[blocking] > self.x[blocking];
-                    self.x[blocking] = if up {
-                        self.hi[blocking]
-                    } else {
-                        self.lo[blocking]
-                    };
-                    self.active[blocking] = if up { 1 } else { -1 };
-                    self.keep_rows_before(blocking);
-                    continue;
-                }
-                let mut worst = 0.0;
-                let mut release = usize::MAX;
-                let mut j = 0;
-                while j < N {
-                    if self.active[j] != 0 {
-                        let mut grad = self.g[j];
-                        let mut c = 0;
-                        while c < N {
-                            grad += self.h[j][c] * self.x[c];
-                            c += 1;
-                        }
-                        let wrong = if self.active[j] > 0 { grad } else { -grad };
-                        if wrong > worst + QP_MULTIPLIER_TOLERANCE {
-                            worst = wrong;
-                            release = j;
-                        }
-                    }
-                    j += 1;
-                }
-                if release == usize::MAX {
-                    return (iter, true);
-                }
-                self.active[release] = 0;
-                self.keep_rows_before(release);
-            }
-            (iter, false)
-        }
-        /// Variable `j` joined or left the free set: Cholesky rows from its
-        /// position in the (index-ordered) free list on must be recomputed.
-        fn keep_rows_before(&mut self, j: usize) {
-            let mut p = 0;
-            let mut c = 0;
-            while c < j {
-                if self.active[c] == 0 {
-                    p += 1;
-                }
-                c += 1;
-            }
-            if p < self.factored {
-                self.factored = p;
-            }
-        }
-        fn collect_free(&mut self) -> usize {
-            let mut nf = 0;
-            let mut j = 0;
-            while j < N {
-                if self.active[j] == 0 {
-                    self.free[nf] = j;
-                    nf += 1;
-                }
-                j += 1;
-            }
-            nf
-        }
-        /// Cholesky of H restricted to the free set; false if not positive definite.
-        fn factor_free(&mut self, nf: usize) -> bool {
-            let mut r = self.factored;
-            while r < nf {
-                let mut c = 0;
-                while c <= r {
-                    let mut s = self.h[self.free[r]][self.free[c]];
-                    let mut k = 0;
-                    while k < c {
-                        s -= self.chol[r][k] * self.chol[c][k];
-                        k += 1;
-                    }
-                    if r == c {
-                        if s <= 0.0 || s.is_nan() {
-                            return false;
-                        }
-                        self.chol[r][r] = libm::sqrt(s);
-                        self.inv_diag[r] = 1.0 / self.chol[r][r];
-                    } else {
-                        self.chol[r][c] = s * self.inv_diag[c];
-                    }
-                    c += 1;
-                }
-                r += 1;
-            }
-            true
-        }
-        /// newton = minimizer over the free variables with active ones at their bounds.
-        fn free_newton_point(&mut self, nf: usize) {
-            let mut j = 0;
-            while j < N {
-                self.newton[j] = self.x[j];
-                j += 1;
-            }
-            let mut r = 0;
-            while r < nf {
-                let row = self.free[r];
-                let mut s = -self.g[row];
-                let mut c = 0;
-                while c < N {
-                    if self.active[c] != 0 {
-                        s -= self.h[row][c] * self.x[c];
-                    }
-                    c += 1;
-                }
-                self.rhs[r] = s;
-                r += 1;
-            }
-            let mut r = 0;
-            while r < nf {
-                let mut s = self.rhs[r];
-                let mut k = 0;
-                while k < r {
-                    s -= self.chol[r][k] * self.rhs[k];
-                    k += 1;
-                }
-                self.rhs[r] = s * self.inv_diag[r];
-                r += 1;
-            }
-            let mut r = nf;
-            while r > 0 {
-                r -= 1;
-                let mut s = self.rhs[r];
-                let mut k = r + 1;
-                while k < nf {
-                    s -= self.chol[k][r] * self.rhs[k];
-                    k += 1;
-                }
-                self.rhs[r] = s * self.inv_diag[r];
-            }
-            let mut r = 0;
-            while r < nf {
-                self.newton[self.free[r]] = self.rhs[r];
-                r += 1;
-            }
-        }
-    }
-    pub fn clamp_u(u: f64) -> f64 {
-        if u > U_MAX_T_PER_M {
-            U_MAX_T_PER_M
-        } else if u < -U_MAX_T_PER_M {
-            -U_MAX_T_PER_M
-        } else {
-            u
-        }
-    }
-    pub fn axis_nearest(axis: &Axis, v: f64) -> Option<usize> {
-        let f = (v - axis.start) / axis.step;
-        if !(f > -0.5 && f < axis.count as f64 - 0.5) {
-            return None;
-        }
-        Some(libm::round(f) as usize)
-    }
-    /// Bisection probes that find any cell among `INDEX_CELLS` (2^64 > any count).
-    const INDEX_PROBES: usize = 64;
-    /// The row-major number of `e`'s cell on the (dense) warm-start index grid
-    /// (position, speed axes alternating, the last axis fastest); None outside
-    /// the grid.
-    pub fn index_flat(e: &[f64; NX]) -> Option<u64> {
-        let mut flat = 0u64;
-        let mut j = 0;
-        while j < NX {
-            let axis = if j % 2 == 0 { &INDEX_POSITION_AXIS } else { &INDEX_SPEED_AXIS };
-            flat = flat * axis.count as u64 + axis_nearest(axis, e[j])? as u64;
-            j += 1;
-        }
-        Some(flat)
-    }
-    /// The first position in `INDEX_CELLS[lo..hi]` whose cell number is not
-    /// below `flat` (`hi` if none), by bisection: `INDEX_PROBES` probes at most.
-    pub fn index_lower_bound(flat: u64, lo: usize, hi: usize) -> usize {
-        let (mut lo, mut hi) = (
-            lo,
-            if hi < INDEX_CELLS.len() { hi } else { INDEX_CELLS.len() },
-        );
-        let mut probes = 0;
-        while lo < hi && probes < INDEX_PROBES {
-            let mid = lo + (hi - lo) / 2;
-            if INDEX_CELLS[mid] < flat {
-                lo = mid + 1;
-            } else {
-                hi = mid;
-            }
-            probes += 1;
-        }
-        lo
-    }
-    /// The slot among the kept cells of the sparse warm-start index
-    /// (`INDEX_CELLS`) of the cell numbered `flat` (see `index_flat`); None
-    /// when no stored plan passes near that cell (it is not kept).
-    pub fn kept_slot(flat: u64) -> Option<usize> {
-        let lo = index_lower_bound(flat, 0, INDEX_CELLS.len());
-        if lo < INDEX_CELLS.len() && INDEX_CELLS[lo] == flat { Some(lo) } else { None }
-    }
-    /// The slot of `e`'s cell among the kept cells of the sparse warm-start
-    /// index (`INDEX_CELLS`); None outside the index grid or in a cell no
-    /// stored plan passes near.
-    pub fn index_cell(e: &[f64; NX]) -> Option<usize> {
-        kept_slot(index_flat(e)?)
-    }
-    /// Most QP iterations measured offline in the index cell of `e` (0: not
-    /// measured, or outside the index).
-    pub fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
-        match index_cell(e) {
-            Some(c) if c < QP_ITERATION_MAP.len() => QP_ITERATION_MAP[c] as u32,
-            _ => 0,
-        }
-    }
-    /// Speed below which a state counts as at rest for the fine plans, m/s.
-    pub const FINE_REST_SPEED_M_PER_S: f64 = 5.0e-3;
-    /// The fine grid point nearest relative state `e` when every speed is
-    /// below `FINE_REST_SPEED_M_PER_S` and every position on the fine grid;
-    /// None otherwise.
-    pub fn fine_cell(e: &[f64; NX]) -> Option<usize> {
-        fine_cell_reaching(e, 0.0)
-    }
-    /// As `fine_cell`, but a position off the fine grid within `reach_m` of
-    /// the target takes the grid's nearest edge.
-    fn fine_cell_reaching(e: &[f64; NX], reach_m: f64) -> Option<usize> {
-        if FINE_COUNT == 0 {
-            return None;
-        }
-        let mut flat = 0usize;
-        let mut i = 0;
-        while i < M {
-            if !(libm::fabs(e[2 * i + 1]) <= FINE_REST_SPEED_M_PER_S) {
-                return None;
-            }
-            let p = e[2 * i];
-            let j = match axis_nearest(&FINE_AXIS, p) {
-                Some(j) => j,
-                None if libm::fabs(p) <= reach_m => {
-                    if p < FINE_AXIS.start { 0 } else { FINE_AXIS.count - 1 }
-                }
-                None => return None,
-            };
-            flat = flat * FINE_AXIS.count + j;
-            i += 1;
-        }
-        if flat >= FINE_COUNT {
-            return None;
-        }
-        Some(flat)
-    }
-    /// Fills `out` with the fine plan from rest nearest relative state `e`
-    /// (see `fine_cell`); None off the fine grid, or where it has no plan.
-    ///
-    /// Positions beyond the fine grid but within half a main grid step of the
-    /// target, where the main grid's nearest plan is the target's own, empty
-    /// one, take the grid's edge (for three capsules: fine grid +-2 mm, main
-    /// step 1 cm; at rest 2.8 mm off, the refinement from the empty plan
-    /// played zero gradient for 2.3 s). That edge plan is a rest-to-rest leg
-    /// into the fine grid (legs compose exactly: the dynamics do not depend on
-    /// position); the refinement and the next fine plan finish the move.
-    pub fn lookup_fine(e: &[f64; NX], out: &mut [f64; K], coasted: bool) -> Option<()> {
-        let flat = fine_cell_reaching(e, 0.5 * PLAN_AXIS.step)?;
-        if !FINE_REACHED[flat] {
-            return None;
-        }
-        *out = if coasted { COASTED_FINE_PLAN_U[flat] } else { FINE_PLAN_U[flat] };
-        Some(())
-    }
-    /// The leg lattice cell of displacement `d = x_start - x_target` (positions;
-    /// speeds ignored); None outside the lattice.
-    fn leg_cell(d: &[f64; NX]) -> Option<usize> {
-        let mut flat = 0usize;
-        let mut i = 0;
-        while i < M {
-            flat = flat * LEG_AXIS.count + axis_nearest(&LEG_AXIS, d[2 * i])?;
-            i += 1;
-        }
-        Some(flat)
-    }
-    /// The first leg from rest at displacement `d = x_start - x_target` toward
-    /// the target (see `Leg`); None where no chain of stored plans gets there.
-    /// Without tables every displacement is one direct leg.
-    pub fn first_leg(d: &[f64; NX]) -> Option<Leg<NX>> {
-        let mut direct = Leg {
-            start_offset_m: [0.0; NX],
-            last: true,
-        };
-        let mut i = 0;
-        while i < M {
-            direct.start_offset_m[2 * i] = d[2 * i];
-            i += 1;
-        }
-        if !USE_TABLES {
-            return Some(direct);
-        }
-        let cell = leg_cell(d)?;
-        if CHAIN_TIME_S[cell] == 0.0 {
-            return Some(direct);
-        }
-        let plan = FIRST_LEG[cell] as usize;
-        if plan >= PLAN_COUNT {
-            return None;
-        }
-        let mut leg = Leg {
-            start_offset_m: [0.0; NX],
-            last: true,
-        };
-        let (mut rest_plan, mut rest_cell) = (plan, cell);
-        let mut i = M;
-        while i > 0 {
-            i -= 1;
-            let offset = PLAN_AXIS.start
-                + (rest_plan % PLAN_AXIS.count) as f64 * PLAN_AXIS.step;
-            let lattice = LEG_AXIS.start
-                + (rest_cell % LEG_AXIS.count) as f64 * LEG_AXIS.step;
-            leg.start_offset_m[2 * i] = offset;
-            if libm::fabs(offset - lattice) > 0.5 * LEG_AXIS.step {
-                leg.last = false;
-            }
-            rest_plan /= PLAN_AXIS.count;
-            rest_cell /= LEG_AXIS.count;
-        }
-        if leg.last {
-            return Some(direct);
-        }
-        Some(leg)
-    }
-    /// Summed minimum rest-to-rest time (s) of the chain of stored plans from
-    /// displacement `d` (nearest lattice point); infinite without a chain or
-    /// without tables.
-    pub fn chain_time_s(d: &[f64; NX]) -> f64 {
-        if !USE_TABLES {
-            return f64::INFINITY;
-        }
-        match leg_cell(d) {
-            Some(cell) => CHAIN_TIME_S[cell],
-            None => f64::INFINITY,
-        }
-    }
-    /// Fills `out` with the stored plan tail for relative state `e` from the
-    /// back-to-back tables; None when `e` is outside the index or its cell has
-    /// no plan.
-    pub fn lookup_tail(e: &[f64; NX], out: &mut [f64; K]) -> Option<()> {
-        lookup_tail_for(e, out, false)
-    }
-    /// As `lookup_tail`, from the tables solved for one sample per actuation
-    /// phase followed by the coast `COAST_S` (constant sampling) when `coasted`.
-    pub fn lookup_tail_for(
-        e: &[f64; NX],
-        out: &mut [f64; K],
-        coasted: bool,
-    ) -> Option<()> {
-        let flat = index_cell(e)?;
-        let (cell, plans) = if coasted {
-            (COASTED_INDEX[flat], &COASTED_PLAN_U)
-        } else {
-            (INDEX[flat], &PLAN_U)
-        };
-        let plan = (cell >> 16) as usize;
-        let offset = (cell & 0xffff) as usize;
-        if plan >= PLAN_COUNT {
-            return None;
-        }
-        let mut i = 0;
-        while i < K {
-            out[i] = if offset + i < K { plans[plan][offset + i] } else { 0.0 };
-            i += 1;
-        }
-        Some(())
-    }
     /// One RK4 step of capsule `i` with forward sensitivities over `h` seconds.
     #[inline(always)]
     fn rk4_capsule(
@@ -1539,7 +1556,8 @@ pub mod explicit {
     //! constant bound, and the QP stops at `QP_MAX_ITERATIONS`, so the
     //! operation count is bounded by `EXPLICIT_CERTIFIED_OPS`.
     use super::explicit_tables::*;
-    use super::solver::{axis_nearest, clamp_u, fine_cell, index_lower_bound, BoxQp};
+    use super::lookup::{axis_nearest, fine_cell, index_lower_bound};
+    use super::qp::{clamp_u, BoxQp};
     use super::spec::*;
     use super::tables::*;
     /// What one explicit step produced besides the plan.

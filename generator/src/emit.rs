@@ -1,7 +1,10 @@
 //! Emission of the specialized solver crate (`generated/`).
 //!
-//! Constants, the drag law and the tables are written with `quote`; the solver
-//! body comes from `templates/solver.rs`, parsed with `syn` (so a broken
+//! Constants, the drag law and the tables are written with `quote`; the code
+//! comes from `templates/` (`qp.rs` the window QP, `lookup.rs` the table
+//! lookups, `solver.rs` the refinement, `explicit.rs` the explicit tier, each
+//! emitted as a module of that name, none importing from one that imports
+//! from it), parsed with `syn` (so a broken
 //! template fails here, not in the user's build); the whole file is formatted
 //! with `prettyplease`. Output is deterministic (no timestamps) so that
 //! `generate --check` can compare bytes.
@@ -14,10 +17,18 @@ use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
 mod explicit;
+mod literal;
+
+pub use literal::EmitError;
+use literal::{float, floats};
 
 const SOLVER_TEMPLATE: &str = include_str!("../templates/solver.rs");
 /// The explicit tier (emitted as module `explicit` beside `solver`).
 const EXPLICIT_TEMPLATE: &str = include_str!("../templates/explicit.rs");
+/// The window QP's engine (module `qp`), shared by both tiers.
+const QP_TEMPLATE: &str = include_str!("../templates/qp.rs");
+/// Table lookups (module `lookup`), shared by both tiers.
+const LOOKUP_TEMPLATE: &str = include_str!("../templates/lookup.rs");
 const LIB_TEMPLATE: &str = include_str!("../templates/lib.rs");
 
 /// Active-set iterations allowed per window QP (each iteration adds or drops
@@ -25,29 +36,6 @@ const LIB_TEMPLATE: &str = include_str!("../templates/lib.rs");
 /// measured maximum over the grid against it).
 pub fn qp_max_iterations(horizon: usize) -> usize {
     3 * horizon
-}
-
-/// A float literal that round-trips exactly; refuses non-finite values.
-fn float(name: &str, v: f64) -> Result<Literal, EmitError> {
-    if !v.is_finite() {
-        return Err(EmitError::NonFinite {
-            name: name.to_string(),
-            value: v,
-        });
-    }
-    Ok(Literal::f64_unsuffixed(v))
-}
-
-fn floats(name: &str, vs: &[f64]) -> Result<Vec<Literal>, EmitError> {
-    vs.iter().map(|&v| float(name, v)).collect()
-}
-
-#[derive(Debug, thiserror::Error)]
-pub enum EmitError {
-    #[error("cannot emit `{name}`: value {value} is not finite")]
-    NonFinite { name: String, value: f64 },
-    #[error("emitted code does not parse: {0}")]
-    Parse(String),
 }
 
 /// Everything a generated module needs: config, model, tables (None for
@@ -253,6 +241,14 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
         .map_err(|e| EmitError::Parse(format!("solver template: {e}")))?;
     let solver_attrs = &solver_file.attrs;
     let solver_items = &solver_file.items;
+    let qp_file =
+        syn::parse_file(QP_TEMPLATE).map_err(|e| EmitError::Parse(format!("qp template: {e}")))?;
+    let qp_attrs = &qp_file.attrs;
+    let qp_items = &qp_file.items;
+    let lookup_file = syn::parse_file(LOOKUP_TEMPLATE)
+        .map_err(|e| EmitError::Parse(format!("lookup template: {e}")))?;
+    let lookup_attrs = &lookup_file.attrs;
+    let lookup_items = &lookup_file.items;
     if let (Some(e), Some(t)) = (input.explicit, input.tables) {
         // The slots parallel the sparse index's kept cells and the fine grid.
         debug_assert_eq!(e.index_slot.len(), t.index_cells.len());
@@ -268,6 +264,14 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
         #spec
         #tables
         #explicit_tables
+        pub mod qp {
+            #(#qp_attrs)*
+            #(#qp_items)*
+        }
+        pub mod lookup {
+            #(#lookup_attrs)*
+            #(#lookup_items)*
+        }
         pub mod solver {
             #(#solver_attrs)*
             #(#solver_items)*

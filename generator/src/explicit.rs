@@ -43,9 +43,10 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::config::Config;
+use crate::grid::unflatten;
 use crate::model::Model;
 use crate::ocp::{rows_to_csc, upper_csc, Ocp};
-use crate::tables::{unflatten, Tables};
+use crate::tables::Tables;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus};
 use rayon::prelude::*;
 use std::collections::BTreeMap;

@@ -12,8 +12,8 @@
 //! it scales the same way: candidates for a cell come only from samples in
 //! its neighbourhood, not from every sample of every plan.
 
+use crate::grid::{flatten, unflatten, Axis, PlanEntry, Progress};
 use crate::ocp::Ocp;
-use crate::tables::{flatten, unflatten, Axis, PlanEntry, Progress};
 use rayon::prelude::*;
 
 /// Cells kept around every stored plan sample: those within this many

@@ -11,7 +11,7 @@
 //! past it, so every waypoint lies in the box spanned by start and target,
 //! which is inside the (convex) workspace whenever both ends are.
 
-use crate::tables::{flatten, unflatten, Axis, PlanEntry};
+use crate::grid::{flatten, unflatten, Axis, PlanEntry};
 use serde::{Deserialize, Serialize};
 
 /// No chain reaches this displacement (a stored first-leg value).

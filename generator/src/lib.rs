@@ -9,6 +9,7 @@ pub mod config;
 pub mod emit;
 pub mod explicit;
 pub mod generate;
+pub mod grid;
 pub mod index;
 pub mod legs;
 pub mod mintime;

@@ -11,8 +11,8 @@
 //! nonconvex, so the result is an upper bound on the true minimum time, as
 //! any local method's is; it is the plan the tables store.
 
+use crate::grid::{flatten, starting_guesses, unflatten, Axis, Progress};
 use crate::ocp::{Ocp, OcpWeights};
-use crate::tables::{flatten, starting_guesses, unflatten, Axis, Progress};
 use rayon::prelude::*;
 
 /// A box around the target at rest: |position error| and |speed|.

@@ -14,7 +14,8 @@
 //! operation count is bounded by `EXPLICIT_CERTIFIED_OPS`.
 
 use super::explicit_tables::*;
-use super::solver::{axis_nearest, clamp_u, fine_cell, index_lower_bound, BoxQp};
+use super::lookup::{axis_nearest, fine_cell, index_lower_bound};
+use super::qp::{clamp_u, BoxQp};
 use super::spec::*;
 use super::tables::*;
 

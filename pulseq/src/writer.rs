@@ -1,9 +1,9 @@
 //! Builds the `.seq` text from a [`PlayedRun`] and writes it atomically.
 
-use crate::shape::stored_samples;
-use crate::{
+use crate::run::{
     PlayedRun, PulseqError, SequenceOptions, PROTON_GYROMAGNETIC_RATIO_HZ_PER_T, PULSEQ_VERSION,
 };
+use crate::shape::stored_samples;
 use md5::{Digest, Md5};
 use std::collections::HashMap;
 use std::fmt::Write as _;

@@ -1,111 +1,31 @@
 //! The scanner-cycle controller: estimator + generated solver + switching
 //! rule + fault handling, in one fixed-size struct.
 
-use crate::estimator::{CapsuleFilter, REACQUIRE_SPEED_STD_M_PER_S};
+use crate::estimator::CapsuleFilter;
 use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
     PaperConstants, TightInputs,
 };
-use capsule_mpc_generated::{Leg, PlanSolver, SolveReport, SolveStatus, Tier};
+use capsule_mpc_generated::{PlanSolver, SolveReport, SolveStatus, Tier};
 
 mod braking;
+mod checks;
+mod fusion;
 mod legs;
+mod numeric;
 mod settings;
 mod station;
+mod status;
 mod tracking;
 
 pub use braking::braking_gradient;
 use braking::*;
-pub use legs::check_workspace;
+pub use checks::check_workspace;
+use checks::*;
+use numeric::*;
 pub use settings::*;
 pub use station::*;
-use tracking::*;
-
-/// Status of one cycle (the plan is always usable and within |u| <= u_max).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(C)]
-pub enum RuntimeStatus {
-    Ok = 0,
-    /// The state is outside the tables: one braking sample (see
-    /// [`braking_gradient`]), never an extrapolated table value. The next
-    /// cycle looks the state up again; at rest outside the tables it starts
-    /// a recovery leg (`Recovering`).
-    Fallback = 1,
-    /// A QP hit its iteration bound; the best feasible plan was used.
-    IterationLimit = 2,
-    /// The measurement was non-finite, beyond `MAX_ABS_POSITION_M`, beyond
-    /// the innovation gate, or part of a glitch (see
-    /// `ControllerSettings::glitch_frames`), and was ignored: the estimate
-    /// was predicted only.
-    MeasurementRejected = 3,
-    /// No measurement this cycle: the estimate was predicted only.
-    MeasurementLost = 4,
-    /// No target set: zero gradient.
-    NoTarget = 5,
-    /// The estimate jumped: `reacquire_after_rejections` gated-out frames
-    /// in a row that agree with one another (`glitch_frames` + 1 against an
-    /// established estimate) replaced it, with the positions and speeds they
-    /// show; or frames returned to the estimate the last re-acquisition
-    /// replaced (a glitch ended) and it was restored. The plan restarted.
-    /// Reported for that one cycle whatever the plan (which may be the
-    /// fallback or, without a target, zero).
-    Reacquired = 6,
-    /// A QP of this solve took more active-set iterations than the offline
-    /// map (`capsule-mpc generate`) measured in the state's index cell: the
-    /// plan converged and is used, but the state lies outside what the
-    /// offline worst-case timing covered.
-    AboveIterationMap = 7,
-    /// The state was outside the tables' range at rest (after the fallback
-    /// braked it): the controller is moving the capsules along a stored plan
-    /// to an intermediate point from which the tables reach the target
-    /// (one or more legs), then plans to the target itself.
-    Recovering = 8,
-}
-
-/// Errors of calls with bad arguments (nothing changes when one is returned).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum RuntimeError {
-    /// A value was NaN or infinite; names the argument.
-    NonFinite(&'static str),
-    /// A slice had the wrong length; names the argument.
-    WrongLength(&'static str),
-    /// The target cannot be reached from the current state with the stored
-    /// plans, even chained (only when the estimate lies outside the
-    /// workspace the tables were made for).
-    TargetOutOfRange,
-    /// A position lies outside the workspace `[S::WORKSPACE_MIN_M,
-    /// S::WORKSPACE_MAX_M]`: names the argument, the capsule (0-based) and
-    /// by how much (m; negative below the box, positive above).
-    OutsideWorkspace {
-        argument: &'static str,
-        capsule: usize,
-        excess_m: f64,
-    },
-    /// A setting is out of its range; names it.
-    BadSetting(&'static str),
-    /// A time stamp is implausible: before the previous actuation ended
-    /// (time going backwards), an actuation start before its measurement,
-    /// or a gap above `MAX_CYCLE_GAP_S`; names the argument.
-    BadTime(&'static str),
-    /// A target speed is not zero: the plans bring the capsules to rest.
-    TargetNotAtRest,
-}
-
-/// What one cycle returns.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CycleOutput<const K: usize> {
-    /// Gradient per sample, T/m; the first `actuation_samples` are to be played.
-    pub gradients_t_per_m: [f64; K],
-    pub actuation_samples: usize,
-    pub status: RuntimeStatus,
-    /// The solver's report (None for fallback / no target).
-    pub solve: Option<SolveReport>,
-    /// Estimated state at the actuation start (absolute, SI).
-    pub estimate: [f64; K2],
-}
-
-/// Room for the estimate in [`CycleOutput`] (2 x the maximum capsule count).
-pub const K2: usize = 16;
+pub use status::*;
 
 /// The closed loop's whole memory.
 #[derive(Debug, Clone)]
@@ -740,22 +660,4 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
         }
     }
-}
-
-/// Every capsule's speed within `REST_SPEED_M_PER_S`.
-fn at_rest<const NX: usize>(x: &[f64; NX]) -> bool {
-    (0..NX / 2).all(|i| libm::fabs(x[2 * i + 1]) <= REST_SPEED_M_PER_S)
-}
-
-/// A one-sample plan (rest zero) for single-step prediction.
-fn single<const K: usize>(u: f64) -> [f64; K] {
-    let mut p = [0.0; K];
-    if K > 0 {
-        p[0] = u;
-    }
-    p
-}
-
-fn sq(v: f64) -> f64 {
-    v * v
 }

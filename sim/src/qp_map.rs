@@ -13,7 +13,7 @@
 use anyhow::Result;
 use capsule_mpc_generator::generate::GeneratedFiles;
 use capsule_mpc_runtime::controller::Sampling;
-use capsule_mpc_runtime::generated::controller::{solver, spec, tables};
+use capsule_mpc_runtime::generated::controller::{lookup, solver, spec, tables};
 use capsule_mpc_runtime::generated::SolveStatus;
 use capsule_mpc_runtime::DefaultController;
 use rayon::prelude::*;
@@ -81,7 +81,7 @@ pub fn measure() -> Vec<u8> {
                 let e1 = solver::predict(&e, s.plan(), 1);
                 s.shift(1);
                 let warm = s.solve(&e1);
-                if let Some(c1) = solver::index_cell(&e1) {
+                if let Some(c1) = lookup::index_cell(&e1) {
                     out.push((c1, warm.max_qp_iterations));
                 }
             }
@@ -117,7 +117,7 @@ fn dilate(map: &[u8]) -> Vec<u8> {
                     *x += (rest % 3) as f64 * step[j % 2] - step[j % 2];
                     rest /= 3;
                 }
-                if let Some(n) = solver::index_cell(&e) {
+                if let Some(n) = lookup::index_cell(&e) {
                     most = most.max(map[n]);
                 }
             }

@@ -8,7 +8,7 @@ use crate::bench::tiers::measure_tiers;
 use crate::bench::timing::{fmt_us, pin_to_one_core, timed, timer_overhead_ns, Percentiles};
 use anyhow::Result;
 use capsule_mpc_runtime::controller::Sampling as RtSampling;
-use capsule_mpc_runtime::generated::controller::{solver, spec, tables};
+use capsule_mpc_runtime::generated::controller::{lookup, solver, spec, tables};
 use capsule_mpc_runtime::generated::{qp_iteration_map, SolveReport, SolveStatus};
 use capsule_mpc_runtime::DefaultController;
 use serde_json::{json, Value};
@@ -74,8 +74,8 @@ pub fn time_state(proto: &DefaultController, e: &[f64; NX]) -> StateTiming {
         solver_warm,
         cold,
         warm,
-        cold_map: solver::qp_iterations_measured(e),
-        warm_map: solver::qp_iterations_measured(&e1),
+        cold_map: lookup::qp_iterations_measured(e),
+        warm_map: lookup::qp_iterations_measured(&e1),
     }
 }
 

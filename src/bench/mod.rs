@@ -41,7 +41,7 @@
 //! `capsule_mpc_generator::model::rk4_capsule` with the config's parameters,
 //! same weights through `OcpWeights::from_config`, same tail cost-to-go,
 //! condensing and line search) whose QP engine is pluggable: the generated
-//! active-set [`solver::BoxQp`] (the reference: it reproduces the generated
+//! active-set [`qp::BoxQp`] (the reference: it reproduces the generated
 //! solver's plan, which is checked), clarabel, and OSQP (feature
 //! `peers-osqp`). OpEn (PANOC) solves the nonlinear window problem itself:
 //! the N window inputs in the box, the nonlinear cost over the whole plan with
@@ -49,7 +49,7 @@
 //! All peers start from the same state and plan as the warm step above.
 //!
 //! [`RefSolver`]: reference::RefSolver
-//! [`solver::BoxQp`]: capsule_mpc_runtime::generated::controller::solver::BoxQp
+//! [`qp::BoxQp`]: capsule_mpc_runtime::generated::controller::qp::BoxQp
 //!
 //! # Layout
 //!

@@ -7,7 +7,7 @@ use anyhow::{bail, Result};
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::model::{rk4_capsule, CapsuleParams, Model};
 use capsule_mpc_generator::ocp::OcpWeights;
-use capsule_mpc_runtime::generated::controller::{solver, spec};
+use capsule_mpc_runtime::generated::controller::{lookup, qp, spec};
 use spec::{K, M, N, NX};
 
 /// Model and weights of the reference loop, from the config (not from the
@@ -188,7 +188,7 @@ pub trait QpEngine {
 /// The generated solver's primal active-set method.
 #[derive(Debug, Clone, Default)]
 pub struct ActiveSetEngine {
-    pub qp: solver::BoxQp,
+    pub qp: qp::BoxQp,
 }
 
 impl QpEngine for ActiveSetEngine {
@@ -277,7 +277,7 @@ impl RefSolver {
     ) -> Option<([f64; K], f64)> {
         let mut best = plan.map(|p| (*p, problem.cost(e, p)));
         let mut cand = [0.0; K];
-        if solver::lookup_tail(e, &mut cand).is_some() {
+        if lookup::lookup_tail(e, &mut cand).is_some() {
             let c = problem.cost(e, &cand);
             if best.as_ref().is_none_or(|b| c < b.1) {
                 best = Some((cand, c));
@@ -425,6 +425,7 @@ impl RefSolver {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use capsule_mpc_runtime::generated::controller::solver;
 
     #[test]
     fn adjoint_gradient_matches_finite_differences() {

@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use capsule_mpc_generator::config::Config;
-use capsule_mpc_runtime::generated::controller::{solver, spec, tables};
+use capsule_mpc_runtime::generated::controller::{lookup, spec, tables};
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling, Scenario};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -86,7 +86,7 @@ pub fn sample_states(config: &Config, n: usize, seed: u64) -> Result<Vec<BenchSt
         // Only states in a kept cell of the sparse warm-start index: the
         // others have no stored plan and go to the runtime's fallback, not
         // to the solver being timed.
-        if solver::index_cell(&e).is_none() {
+        if lookup::index_cell(&e).is_none() {
             continue;
         }
         states.push(BenchState {

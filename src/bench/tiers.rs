@@ -21,7 +21,7 @@ use crate::bench::reference::{DenseQp, QpEngine};
 use crate::bench::states::BenchState;
 use crate::bench::timing::{fmt_us, timed, Percentiles};
 use capsule_mpc_generator::explicit::explicit_step_ops;
-use capsule_mpc_runtime::generated::controller::{explicit, explicit_tables, solver, spec};
+use capsule_mpc_runtime::generated::controller::{explicit, explicit_tables, qp, solver, spec};
 use capsule_mpc_runtime::generated::SolveStatus;
 use serde_json::{json, Value};
 use spec::{K, N, NX};
@@ -152,7 +152,7 @@ fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
     let count = peer_count.min(starts.len());
     let stride = (starts.len() / count.max(1)).max(1);
     let mut cases: Vec<(DenseQp, usize)> = Vec::new();
-    let mut qp = solver::BoxQp::new();
+    let mut qp = qp::BoxQp::new();
     let mut plan = [0.0; K];
     for (_, e1) in starts.iter().step_by(stride).take(count) {
         let Some(slot) = explicit::explicit_slot(e1, false, usize::MAX) else {
@@ -177,7 +177,7 @@ fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
         let mut best = u64::MAX;
         let mut x = [0.0; N];
         for _ in 0..REPEATS {
-            let mut q = solver::BoxQp::new();
+            let mut q = qp::BoxQp::new();
             q.h = case.h;
             q.g = case.g;
             q.lo = case.lo;

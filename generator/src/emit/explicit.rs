@@ -1,7 +1,7 @@
 //! Emission of the explicit tier's data (`explicit_tables` in a controller
 //! module; see `crate::explicit`).
 
-use super::{float, floats, EmitError};
+use super::literal::{float, floats, EmitError};
 use crate::explicit::{explicit_step_ops, ExplicitTables, NO_SLOT};
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;

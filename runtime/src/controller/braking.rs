@@ -3,7 +3,9 @@
 //! the group's centre and spread, the mean gradient gain) that the hold
 //! law uses.
 
-use super::*;
+use super::settings::*;
+use super::status::K2;
+use capsule_mpc_generated::*;
 
 /// Fallback outside the tables: one braking sample, bounded by u_max,
 /// never an extrapolated table value. One gradient changes every capsule's
@@ -144,4 +146,9 @@ pub(super) fn mean_gradient_gain<S: PlanSolver<NX, K>, const NX: usize, const K:
         mean_g += next[1] / (1.0e-3 * S::DT_S) / m as f64;
     }
     mean_g
+}
+
+/// Every capsule's speed within `REST_SPEED_M_PER_S`.
+pub(super) fn at_rest<const NX: usize>(x: &[f64; NX]) -> bool {
+    (0..NX / 2).all(|i| libm::fabs(x[2 * i + 1]) <= REST_SPEED_M_PER_S)
 }

@@ -1,8 +1,10 @@
 //! Legs of a move: a target one stored plan does not reach is reached
 //! through waypoints (chained rest-to-rest plans, see the generator's
-//! `legs`), and the workspace every target must lie in.
+//! `legs`).
 
-use super::*;
+use super::settings::*;
+use super::Controller;
+use capsule_mpc_generated::*;
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
     /// The next leg from the capsules' positions in `x` to `target`. A
@@ -83,28 +85,4 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         (below(REPLAN_SPEED_M_PER_S) && beyond(WAYPOINT_POSITION_M))
             || (below(REST_SPEED_M_PER_S) && beyond(self.settings.hold_enter_position_m))
     }
-}
-
-/// Positions of `x` (every `stride`-th entry: 1 for positions only, 2 for
-/// a full state) must lie in the solver's workspace.
-pub fn check_workspace<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
-    argument: &'static str,
-    x: &[f64],
-    stride: usize,
-) -> Result<(), RuntimeError> {
-    for (capsule, &p) in x.iter().step_by(stride).enumerate() {
-        let excess_m = if p < S::WORKSPACE_MIN_M {
-            p - S::WORKSPACE_MIN_M
-        } else if p > S::WORKSPACE_MAX_M {
-            p - S::WORKSPACE_MAX_M
-        } else {
-            continue;
-        };
-        return Err(RuntimeError::OutsideWorkspace {
-            argument,
-            capsule,
-            excess_m,
-        });
-    }
-    Ok(())
 }

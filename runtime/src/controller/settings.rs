@@ -2,7 +2,7 @@
 //! switching rule, the tunable values with their defaults (named
 //! constants), and the range check every setting passes.
 
-use super::RuntimeError;
+use super::status::RuntimeError;
 
 /// How the scanner interleaves tracking and actuation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -2,7 +2,14 @@
 //! glitches and re-acquisition, and the estimator's prediction through
 //! the real gaps.
 
-use super::*;
+use super::checks::*;
+use super::fusion::*;
+use super::numeric::*;
+use super::settings::*;
+use super::status::*;
+use super::Controller;
+use crate::estimator::*;
+use capsule_mpc_generated::*;
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
     /// One scanner cycle on the host's clock. `measured_positions_m` (None:
@@ -282,54 +289,5 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 .iter()
                 .all(|f| f.position_std_m() <= REPLACED_TRACK_MAX_STD_M);
         }
-    }
-}
-
-/// What a finite-length frame is to the estimator.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Measurement {
-    Accepted,
-    /// Non-finite or beyond the physical range: ignored, not counted.
-    Invalid,
-    /// Plausible but beyond the innovation gate: ignored, counted toward
-    /// re-acquisition.
-    GatedOut,
-}
-
-/// `WrongLength("measured_positions_m")` unless a frame has M positions.
-pub(super) fn check_frame_length<const NX: usize>(z: Option<&[f64]>) -> Result<(), RuntimeError> {
-    match z {
-        Some(z) if z.len() != NX / 2 => Err(RuntimeError::WrongLength("measured_positions_m")),
-        _ => Ok(()),
-    }
-}
-
-/// Whether every position of frame `z` is within the innovation gate
-/// (`MEASUREMENT_GATE_NIS`) of `filters` (measurement variance `r_m2`).
-pub(super) fn within_gate(filters: &[CapsuleFilter], z: &[f64], r_m2: f64) -> bool {
-    filters.iter().zip(z).all(|(f, &zi)| {
-        let innovation = zi - f.mean[0];
-        innovation * innovation / (f.cov[0] + r_m2) <= MEASUREMENT_GATE_NIS
-    })
-}
-
-/// Normalized innovation squared of frame `z` against `filters`, summed
-/// over the capsules.
-pub(super) fn nis(filters: &[CapsuleFilter], z: &[f64], r_m2: f64) -> f64 {
-    filters
-        .iter()
-        .zip(z)
-        .map(|(f, &zi)| sq(zi - f.mean[0]) / (f.cov[0] + r_m2))
-        .sum()
-}
-
-/// Measurement update of every capsule's filter with frame `z`.
-pub(super) fn update_filters(filters: &mut [CapsuleFilter], z: &[f64], r_m2: f64) {
-    for (f, &zi) in filters.iter_mut().zip(z) {
-        f.update(zi, r_m2);
-        // Behind a wide gate (a fresh candidate, or a large disturbance
-        // bound) one frame can imply any speed; beyond the physical range
-        // the model's prediction overflows to NaN.
-        f.mean[1] = f.mean[1].clamp(-MAX_ABS_SPEED_M_PER_S, MAX_ABS_SPEED_M_PER_S);
     }
 }
