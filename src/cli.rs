@@ -290,6 +290,10 @@ pub struct ReachArgs {
     /// Simulated time per run, s (default: long enough for the grid).
     #[arg(long, value_parser = positive_seconds)]
     pub duration: Option<f64>,
+    /// Extra compute/transfer delay after each tracking phase, s, for the
+    /// scanner-cycle samplings (overrides the config's).
+    #[arg(long, value_name = "S")]
+    pub extra_delay: Option<f64>,
     /// Write every target's outcome and the summary (JSON) here.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,

@@ -32,6 +32,7 @@ fn ideal_reach(step_m: f64) -> (Vec<ReachPoint>, ReachSummary) {
         seed: 1,
         start_m: Vec::new(),
         duration_s: Some(RUN_S),
+        extra_delay_s: None,
     };
     let points = reach_map(&three(), &opts, &|| {}).unwrap();
     let summary = ReachSummary::of(&points);

@@ -384,6 +384,21 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         if measured > 0 && report.max_qp_iterations > measured && out.status == RuntimeStatus::Ok {
             out.status = RuntimeStatus::AboveIterationMap;
         }
+        if at_rest(x) {
+            // At rest an idle sample (and the coast after it) leaves the
+            // state as it is: a plan that starts idle only waits, and
+            // re-planned from the same state it waits again, for ever
+            // (seen: a 5 cm move under constant sampling with 60 ms gaps
+            // played zero gradient for 14 s). Start at its first acting
+            // sample instead: from rest that is the same plan, earlier.
+            let idle = leading_idle_samples(
+                self.solver.plan(),
+                IDLE_GRADIENT_FRACTION * S::U_MAX_T_PER_M,
+            );
+            if idle < K {
+                self.solver.shift(idle);
+            }
+        }
         for (o, &u) in out.gradients_t_per_m.iter_mut().zip(self.solver.plan()) {
             // The solver keeps |u| <= u_max; clamp again as a last invariant.
             *o = u.clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M);

@@ -203,10 +203,24 @@ pub fn check_duration(duration_s: f64) -> Result<()> {
     Ok(())
 }
 
+/// Longest extra delay after tracking the runtime accepts, s.
+pub const MAX_EXTRA_DELAY_S: f64 = 1.0;
+
+/// The extra delay after each tracking phase must lie in
+/// `[0, MAX_EXTRA_DELAY_S]` s (the runtime refuses others); the error says
+/// the value and the range.
+pub fn check_extra_delay(extra_delay_s: f64) -> Result<()> {
+    if !(0.0..=MAX_EXTRA_DELAY_S).contains(&extra_delay_s) {
+        bail!("extra delay {extra_delay_s} s is outside [0, {MAX_EXTRA_DELAY_S}] s");
+    }
+    Ok(())
+}
+
 /// Runs the closed loop and returns the full report.
 pub fn run(config: &Config, opts: &RunOptions) -> Result<RunReport> {
     use capsule_mpc_runtime::generated::{controller, paper_preset, three_capsules};
     check_duration(opts.duration_s)?;
+    check_extra_delay(opts.extra_delay_s)?;
     let module = compiled_controller_for(config)?;
     match (opts.preset, module) {
         (Preset::Default, ControllerModule::Controller) => {

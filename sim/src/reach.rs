@@ -37,6 +37,9 @@ pub struct ReachOptions {
     /// Simulated time per run, s; None: long enough for the grid's moves
     /// (see [`default_duration_s`]).
     pub duration_s: Option<f64>,
+    /// Extra delay after each tracking phase, s (odd scanner timing); None:
+    /// the config's `scanner.extra_delay_s`.
+    pub extra_delay_s: Option<f64>,
 }
 
 /// Simulated time per run when none is given: 3 s plus 0.5 s per cm of the
@@ -159,6 +162,9 @@ pub fn reach_map(
         .unwrap_or_else(|| default_duration_s(opts.range_m, opts.sampling));
     // A bad duration would refuse every target: say so once.
     crate::closed_loop::check_duration(duration_s)?;
+    if let Some(d) = opts.extra_delay_s {
+        crate::closed_loop::check_extra_delay(d)?;
+    }
     let points = targets
         .par_iter()
         .map(|t| {
@@ -167,6 +173,9 @@ pub fn reach_map(
             run_opts.start_m = start.clone();
             run_opts.seed = opts.seed;
             run_opts.duration_s = duration_s;
+            if let Some(d) = opts.extra_delay_s {
+                run_opts.extra_delay_s = d;
+            }
             run_opts.disturbance = match opts.disturbance {
                 DisturbanceLevel::None => DisturbanceConfig::default(),
                 level => level.config_of_kind(&model, opts.seed, opts.disturbance_kind),

@@ -12,3 +12,11 @@ pub(super) fn single<const K: usize>(u: f64) -> [f64; K] {
 pub(super) fn sq(v: f64) -> f64 {
     v * v
 }
+
+/// Samples at the start of `plan` whose gradient is at most `idle_t_per_m`
+/// in magnitude (`plan.len()` when all are).
+pub(super) fn leading_idle_samples(plan: &[f64], idle_t_per_m: f64) -> usize {
+    plan.iter()
+        .position(|u| libm::fabs(*u) > idle_t_per_m)
+        .unwrap_or(plan.len())
+}

@@ -204,6 +204,11 @@ pub const GAP_SMOOTHING: f64 = 0.3;
 pub const REST_SPEED_M_PER_S: f64 = 5.0e-3;
 /// Coasting horizon the fallback's braking law minimizes the drift over, s.
 pub const BRAKING_HORIZON_S: f64 = 1.0;
+/// A plan sample whose gradient is at most this fraction of u_max is idle:
+/// from rest it moves the capsules by under 2 um (at 40 mT/m full scale,
+/// 0.04 mT/m for 20 ms), so a plan from rest skips the idle samples it
+/// starts with.
+pub const IDLE_GRADIENT_FRACTION: f64 = 1.0e-3;
 /// After re-acquisition the estimate it replaced is kept as an alternative
 /// (a frame glitch re-acquires onto the glitch; when true frames return
 /// they match the replaced estimate) until its position uncertainty
