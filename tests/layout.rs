@@ -103,6 +103,9 @@ struct Module {
     bindings: BTreeMap<String, Vec<String>>,
     /// Paths of `use` globs (`use super::*`), absolute.
     globs: Vec<Vec<String>>,
+    /// Names of the items the module defines (functions, types, traits,
+    /// constants, statics, macros).
+    defines: BTreeSet<String>,
     /// Every path the module's items mention.
     references: Vec<Vec<String>>,
 }
@@ -236,6 +239,9 @@ impl Crate {
             if let syn::Item::Mod(m) = item {
                 module.children.insert(m.ident.to_string());
             }
+            if let Some(name) = defined_name(item) {
+                module.defines.insert(name);
+            }
         }
         let absolute =
             |p: &[String]| -> Vec<String> { absolute_path(&path, &module_children(items), p) };
@@ -296,11 +302,37 @@ impl Crate {
                 at.push(segment.clone());
                 continue;
             }
-            if let Some(bound) = module.bindings.get(segment) {
-                let mut through = bound.clone();
-                through.extend_from_slice(&path[i + 1..]);
-                return self.resolve(&through, depth + 1).or(Some(at));
+            let rest = &path[i + 1..];
+            if module.defines.contains(segment) {
+                return Some(at);
             }
+            if let Some(bound) = module.bindings.get(segment) {
+                // A name bound to something outside the crate is no edge.
+                let mut through = bound.clone();
+                through.extend_from_slice(rest);
+                return self.resolve(&through, depth + 1);
+            }
+            // A glob re-export (`pub use settings::*`): the first glob
+            // module that defines or binds the name.
+            for glob in &module.globs {
+                let Some(base) = self.resolve(glob, depth + 1) else {
+                    continue;
+                };
+                let Some(inner) = self.modules.get(&base) else {
+                    continue;
+                };
+                if inner.defines.contains(segment)
+                    || inner.bindings.contains_key(segment)
+                    || inner.children.contains(segment)
+                {
+                    let mut through = vec!["crate".to_string()];
+                    through.extend(base.iter().cloned());
+                    through.push(segment.clone());
+                    through.extend_from_slice(rest);
+                    return self.resolve(&through, depth + 1);
+                }
+            }
+            // Unknown (a variant, a field, a macro-made item): the module.
             return Some(at);
         }
         Some(at)
@@ -327,6 +359,24 @@ impl Crate {
         }
         edges
     }
+}
+
+/// The name an item defines in its module's namespace, if any.
+fn defined_name(item: &syn::Item) -> Option<String> {
+    let ident = match item {
+        syn::Item::Const(i) => &i.ident,
+        syn::Item::Enum(i) => &i.ident,
+        syn::Item::Fn(i) => &i.sig.ident,
+        syn::Item::Static(i) => &i.ident,
+        syn::Item::Struct(i) => &i.ident,
+        syn::Item::Trait(i) => &i.ident,
+        syn::Item::TraitAlias(i) => &i.ident,
+        syn::Item::Type(i) => &i.ident,
+        syn::Item::Union(i) => &i.ident,
+        syn::Item::Macro(i) => i.ident.as_ref()?,
+        _ => return None,
+    };
+    Some(ident.to_string())
 }
 
 fn module_children(items: &[syn::Item]) -> BTreeSet<String> {
@@ -557,6 +607,23 @@ fn the_cycle_check_finds_a_cycle_through_a_re_export() {
     std::fs::write(root.join("b.rs"), "pub struct Other(pub u8);\n").unwrap();
     let krate = Crate::read(&root.join("lib.rs"));
     assert!(cycles(&krate.edges()).is_empty());
+    // Through a glob re-export: `b` uses `crate::Thing`, which the root
+    // re-exports from `a` with a glob, and `a` uses `b`.
+    std::fs::write(root.join("lib.rs"), "mod a;\nmod b;\npub use a::*;\n").unwrap();
+    std::fs::write(root.join("b.rs"), "pub struct Other(crate::Thing);\n").unwrap();
+    let krate = Crate::read(&root.join("lib.rs"));
+    let edges = krate.edges();
+    assert!(
+        edges[&b].contains_key(&a),
+        "the glob re-export must resolve to a"
+    );
+    assert_eq!(cycles(&edges).len(), 1);
+    std::fs::write(
+        root.join("lib.rs"),
+        "mod a;\nmod b;\npub use a::Thing;\npub struct Root;\n",
+    )
+    .unwrap();
+    std::fs::write(root.join("b.rs"), "pub struct Other(pub u8);\n").unwrap();
     // A child's `use super::*` test module alone is no cycle.
     std::fs::write(
         root.join("b.rs"),
