@@ -247,7 +247,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// workspace, speeds exactly 0 (the plans bring the capsules to rest; a
     /// moving target is refused with `TargetNotAtRest`). Reached from
     /// wherever the capsules are, through waypoints when one stored plan
-    /// does not reach (see [`Leg`]); the plan restarts.
+    /// does not reach (see [`Leg`](capsule_mpc_generated::Leg)); the plan restarts.
     pub fn set_target(&mut self, target: &[f64; NX]) -> Result<(), RuntimeError> {
         if target.iter().any(|v| !v.is_finite()) {
             return Err(RuntimeError::NonFinite("target"));

@@ -53,8 +53,8 @@ pub struct ControllerSettings {
     /// (false, the paper's way).
     pub compensate_delay: bool,
     /// Tracking phase duration, s: the fixed timing of
-    /// [`Controller::cycle`], and the gap the plans model until
-    /// [`Controller::cycle_at`] has measured one.
+    /// [`Controller::cycle`](super::Controller::cycle), and the gap the plans model until
+    /// [`Controller::cycle_at`](super::Controller::cycle_at) has measured one.
     pub tracking_time_s: f64,
     /// Extra compute/transfer delay after tracking, s (as `tracking_time_s`).
     pub extra_delay_s: f64,

@@ -9,7 +9,7 @@ use capsule_mpc_generated::SolveReport;
 pub enum RuntimeStatus {
     Ok = 0,
     /// The state is outside the tables: one braking sample (see
-    /// [`braking_gradient`]), never an extrapolated table value. The next
+    /// [`braking_gradient`](super::braking_gradient)), never an extrapolated table value. The next
     /// cycle looks the state up again; at rest outside the tables it starts
     /// a recovery leg (`Recovering`).
     Fallback = 1,
