@@ -39,6 +39,31 @@ pub fn sequence_options(config: &Config) -> SequenceOptions {
     }
 }
 
+/// Before a run is simulated for `--pulseq`: its sample time, tracking time
+/// and extra delay must each be a whole number of the gradient raster, since
+/// every block of the file starts on it (a scanner plays on its raster). The
+/// error names the setting and the raster, instead of a sample after the run.
+pub fn check_timing_on_raster(config: &Config, extra_delay_s: f64) -> Result<()> {
+    let raster_s = config.scanner.gradient_raster_or_default_s();
+    for (name, value) in [
+        ("controller.sample_time_s", config.controller.sample_time_s),
+        ("scanner.tracking_time_s", config.scanner.tracking_time_s),
+        (
+            "the extra delay (--extra-delay or scanner.extra_delay_s)",
+            extra_delay_s,
+        ),
+    ] {
+        let steps = value / raster_s;
+        if !(steps.is_finite() && (steps - steps.round()).abs() <= 1e-6 * steps.abs().max(1.0)) {
+            bail!(
+                "--pulseq: {name} = {value} s is not a whole number of the {raster_s} s gradient raster \
+                 (scanner.gradient_raster_s); every block of the sequence starts on the raster"
+            );
+        }
+    }
+    Ok(())
+}
+
 /// The played timeline of `report`: actuation samples of `sample_time_s`,
 /// tracking phases of `tracking_time_s` starting at each measurement (none for
 /// ideal sampling, whose measurements take no time), and the run's metadata.

@@ -1,7 +1,9 @@
 //! `simulate --pulseq`: the played timeline taken from a closed-loop run, and
 //! the file written from it (the pypulseq round trip is tests/pulseq/run.sh).
 
-use capsule_mpc::pulseq_export::{played_run, sequence_options, write_pulseq};
+use capsule_mpc::pulseq_export::{
+    check_timing_on_raster, played_run, sequence_options, write_pulseq,
+};
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling};
 use capsule_mpc_sim::plant::Phase;
@@ -123,4 +125,51 @@ fn a_slew_limit_the_run_cannot_meet_is_an_error_naming_the_sample() {
         "{err}"
     );
     assert!(!path.exists());
+}
+
+/// Timing off the gradient raster is refused before anything is simulated
+/// or written, naming the setting; on the raster it passes.
+#[test]
+fn timing_off_the_raster_is_refused_before_the_run() {
+    let config = Config::embedded_default();
+    check_timing_on_raster(&config, 0.0).unwrap();
+    check_timing_on_raster(&config, 0.013).unwrap();
+    let err = check_timing_on_raster(&config, 0.0123456)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("extra delay") && err.contains("0.0123456") && err.contains("raster"),
+        "{err}"
+    );
+    let mut odd = config.clone();
+    odd.scanner.tracking_time_s = 0.020_005;
+    let err = check_timing_on_raster(&odd, 0.0).unwrap_err().to_string();
+    assert!(err.contains("scanner.tracking_time_s"), "{err}");
+
+    // Through the command line: one error line, exit 1, no file written.
+    let dir = tempfile::tempdir().unwrap();
+    let (seq, json) = (dir.path().join("run.seq"), dir.path().join("run.json"));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_capsule-mpc"))
+        .args([
+            "simulate",
+            "--scenario",
+            "A",
+            "--sampling",
+            "variable",
+            "--extra-delay",
+            "0.0123456",
+        ])
+        .arg("--pulseq")
+        .arg(&seq)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.starts_with("error: --pulseq: the extra delay"),
+        "{stderr}"
+    );
+    assert!(!seq.exists() && !json.exists());
 }

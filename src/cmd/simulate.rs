@@ -36,6 +36,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if let Some(d) = args.extra_delay {
         opts.extra_delay_s = d;
     }
+    if args.pulseq.is_some() {
+        crate::pulseq_export::check_timing_on_raster(&config, opts.extra_delay_s)?;
+    }
     if disturbance == DisturbanceLevel::None {
         opts.disturbance = DisturbanceConfig::default();
     }
