@@ -379,6 +379,15 @@ pub struct FiguresArgs {
     pub duration: f64,
 }
 
+/// `--extra-delay` is a delay after each tracking phase: ideal sampling has
+/// none, so the flag with `--sampling ideal` is refused rather than ignored.
+pub fn extra_delay_for(sampling: SamplingArg, extra_delay_s: Option<f64>) -> Result<Option<f64>> {
+    if let (SamplingArg::Ideal, Some(d)) = (sampling, extra_delay_s) {
+        bail!("--extra-delay {d} applies to the scanner cycle (--sampling constant or variable); ideal sampling has no tracking phase to delay");
+    }
+    Ok(extra_delay_s)
+}
+
 /// `--start` for `capsules` capsules (empty: the origin). Errors on a wrong
 /// length or a non-finite value; the workspace is checked by the run.
 pub fn start_positions(start: Option<&[f64]>, capsules: usize) -> Result<Vec<f64>> {

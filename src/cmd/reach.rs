@@ -33,7 +33,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         seed: args.seed,
         start_m: start_positions(args.start.as_deref(), config.capsule_count())?,
         duration_s: args.duration,
-        extra_delay_s: args.extra_delay,
+        extra_delay_s: crate::cli::extra_delay_for(args.sampling, args.extra_delay)?,
     };
     let targets = capsule_mpc_sim::reach::grid_targets(
         &if opts.start_m.is_empty() {

@@ -33,7 +33,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if let Some(r) = args.refine {
         opts.refine = r.into();
     }
-    if let Some(d) = args.extra_delay {
+    if let Some(d) = crate::cli::extra_delay_for(args.sampling, args.extra_delay)? {
         opts.extra_delay_s = d;
     }
     if args.pulseq.is_some() {
