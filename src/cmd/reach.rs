@@ -57,8 +57,22 @@ pub fn run(args: &ReachArgs) -> Result<()> {
     let summary = ReachSummary::of(&points);
     print_table(&points);
     let fmt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+    // The zero-gradient gap after each actuation phase (tracking + extra
+    // delay); ideal sampling has none.
+    let gap_s = match sampling {
+        Sampling::Ideal => 0.0,
+        Sampling::Constant | Sampling::Variable => {
+            config.scanner.tracking_time_s
+                + opts.extra_delay_s.unwrap_or(config.scanner.extra_delay_s)
+        }
+    };
+    let gap = if gap_s > 0.0 {
+        format!(", {:.0} ms gaps", gap_s * 1e3)
+    } else {
+        String::new()
+    };
     println!(
-        "{} targets ({} sampling, disturbance {:?} {}, seed {}) in {:.1} s: {} refused, {} never settled; settle / min-time bound median {} worst {}{}; settle time median {} s worst {} s",
+        "{} targets ({} sampling{gap}, disturbance {:?} {}, seed {}) in {:.1} s: {} refused, {} never settled; settle / min-time bound median {} worst {}{}; settle time median {} s worst {} s",
         summary.targets,
         sampling.name(),
         disturbance,
@@ -82,6 +96,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
             "disturbance": format!("{disturbance:?}").to_lowercase(),
             "disturbance_model": disturbance_kind_name(opts.disturbance_kind),
             "seed": args.seed,
+            "gap_s": gap_s,
             "range_m": opts.range_m,
             "step_m": opts.step_m,
             "summary": summary,
