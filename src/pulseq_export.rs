@@ -12,8 +12,8 @@ use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::tables::{config_hash, hex};
 use capsule_mpc_pulseq::{
-    write_sequence_file, ActuationSample, PlayedRun, ScannerLimits, Sequence, SequenceOptions,
-    TrackingPhase, TrackingPlaceholder,
+    gradient_raster_steps, write_sequence_file, ActuationSample, PlayedRun, ScannerLimits,
+    Sequence, SequenceOptions, TrackingPhase, TrackingPlaceholder,
 };
 use capsule_mpc_sim::plant::Phase;
 use capsule_mpc_sim::report::RunReport;
@@ -53,12 +53,8 @@ pub fn check_timing_on_raster(config: &Config, extra_delay_s: f64) -> Result<()>
             extra_delay_s,
         ),
     ] {
-        let steps = value / raster_s;
-        if !(steps.is_finite() && (steps - steps.round()).abs() <= 1e-6 * steps.abs().max(1.0)) {
-            bail!(
-                "--pulseq: {name} = {value} s is not a whole number of the {raster_s} s gradient raster \
-                 (scanner.gradient_raster_s); every block of the sequence starts on the raster"
-            );
+        if let Err(e) = gradient_raster_steps(name, value, raster_s) {
+            bail!("--pulseq: {e} (scanner.gradient_raster_s); every block of the sequence starts on the raster");
         }
     }
     Ok(())

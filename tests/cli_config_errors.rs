@@ -194,32 +194,34 @@ fn an_overlong_run_is_refused_with_the_bound() {
 /// sampling (no tracking phase to delay) and outside [0, 1] s.
 #[test]
 fn extra_delay_is_refused_where_it_means_nothing_or_is_out_of_range() {
-    let out = bin()
-        .args(["reach", "--range-cm", "1", "--extra-delay", "0.02"])
-        .output()
-        .unwrap();
-    assert_one_line_error(&out, "--extra-delay 0.02 applies to the scanner cycle");
-    let out = bin()
-        .args(["simulate", "--sampling", "ideal", "--extra-delay", "0.02"])
-        .output()
-        .unwrap();
-    assert_one_line_error(&out, "ideal sampling has no tracking phase");
-    let out = bin()
-        .args([
-            "reach",
-            "--range-cm",
-            "1",
-            "--sampling",
-            "constant",
-            "--extra-delay",
-            "2",
-        ])
-        .output()
-        .unwrap();
-    assert_one_line_error(&out, "extra delay 2 s is outside [0, 1] s");
-    let out = bin()
-        .args(["simulate", "--sampling", "constant", "--extra-delay=-0.5"])
-        .output()
-        .unwrap();
-    assert_one_line_error(&out, "extra delay -0.5 s is outside [0, 1] s");
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["reach", "--range-cm", "1", "--extra-delay", "0.02"],
+            "--extra-delay 0.02 applies to the scanner cycle",
+        ),
+        (
+            &["simulate", "--sampling", "ideal", "--extra-delay", "0.02"],
+            "ideal sampling has no tracking phase",
+        ),
+        (
+            &[
+                "reach",
+                "--range-cm",
+                "1",
+                "--sampling",
+                "constant",
+                "--extra-delay",
+                "2",
+            ],
+            "extra delay 2 s is outside [0, 1] s",
+        ),
+        (
+            &["simulate", "--sampling", "constant", "--extra-delay=-0.5"],
+            "extra delay -0.5 s is outside [0, 1] s",
+        ),
+    ];
+    for (args, needle) in cases {
+        let out = bin().args(args).output().unwrap();
+        assert_one_line_error(&out, needle);
+    }
 }

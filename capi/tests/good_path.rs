@@ -16,55 +16,95 @@ fn hold(s: &mut [f64; 4], u: f64) {
     plant::hold_for(s, u, 0.02);
 }
 
+/// A host's loop through the C functions against the plant: the handle,
+/// the library's dimensions, the plant state and the host's clock.
+struct HostLoop {
+    h: *mut CapsuleMpc,
+    n: u32,
+    k: u32,
+    dt: f64,
+    u_max: f64,
+    grads: Vec<f64>,
+    s: [f64; 4],
+    t: f64,
+}
+
+impl HostLoop {
+    /// Reads the dimensions and sets scenario C's target on `h`.
+    fn new(h: *mut CapsuleMpc) -> HostLoop {
+        let (mut m, mut n, mut k, mut dt, mut u_max) = (0u32, 0u32, 0u32, 0.0, 0.0);
+        unsafe {
+            assert_eq!(
+                capsule_mpc_dimensions(&mut m, &mut n, &mut k, &mut dt, &mut u_max),
+                CAPSULE_MPC_OK
+            );
+            assert_eq!(
+                capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+                CAPSULE_MPC_OK
+            );
+        }
+        HostLoop {
+            h,
+            n,
+            k,
+            dt,
+            u_max,
+            grads: vec![0.0; 256],
+            s: [0.0; 4],
+            t: 0.0,
+        }
+    }
+
+    /// A 20 ms tracking phase: the frame (measured at its start) is fed.
+    fn track(&mut self) {
+        let z = [self.s[0], self.s[2]];
+        hold(&mut self.s, 0.0);
+        let rc = unsafe { capsule_mpc_feed_tracking(self.h, z.as_ptr(), 2, self.t, 0) };
+        assert_eq!(rc, CAPSULE_MPC_OK);
+        self.t += 0.02;
+    }
+
+    /// Asks for the next actuation phase and plays it (|u| <= u_max
+    /// checked); returns its status.
+    fn actuate(&mut self) -> i32 {
+        let (mut samples, mut status) = (0u32, -1i32);
+        let rc = unsafe {
+            capsule_mpc_next_actuation(
+                self.h,
+                self.t,
+                self.grads.as_mut_ptr(),
+                self.k as usize,
+                &mut samples,
+                &mut status,
+            )
+        };
+        assert_eq!(rc, CAPSULE_MPC_OK);
+        assert!(samples >= 1 && samples <= self.n);
+        for &u in &self.grads[..samples as usize] {
+            assert!(u.abs() <= self.u_max);
+            hold(&mut self.s, u);
+            self.t += self.dt;
+        }
+        status
+    }
+}
+
 /// Scenario C through the C functions; returns the final plant state.
 fn closed_loop(mode: i32) -> [f64; 4] {
     let mut b = initialized();
     let h = handle(&mut b);
-    let (mut m, mut n, mut k, mut dt, mut u_max) = (0u32, 0u32, 0u32, 0.0, 0.0);
-    let mut grads = vec![0.0; 256];
-    let mut s = [0.0; 4];
-    let mut t = 0.0;
-    unsafe {
-        assert_eq!(
-            capsule_mpc_dimensions(&mut m, &mut n, &mut k, &mut dt, &mut u_max),
-            CAPSULE_MPC_OK
-        );
-        assert_eq!(capsule_mpc_set_sampling(h, mode), CAPSULE_MPC_OK);
-        assert_eq!(
-            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
-            CAPSULE_MPC_OK
-        );
-        while t < 3.0 - 1e-9 {
-            if mode == CAPSULE_MPC_SAMPLING_IDEAL {
-                assert_eq!(capsule_mpc_feed_state(h, s.as_ptr(), 4), CAPSULE_MPC_OK);
-            } else {
-                let z = [s[0], s[2]];
-                hold(&mut s, 0.0);
-                assert_eq!(
-                    capsule_mpc_feed_tracking(h, z.as_ptr(), 2, t, 0),
-                    CAPSULE_MPC_OK
-                );
-                t += 0.02;
-            }
-            let (mut samples, mut status) = (0u32, -1i32);
-            let rc = capsule_mpc_next_actuation(
-                h,
-                t,
-                grads.as_mut_ptr(),
-                k as usize,
-                &mut samples,
-                &mut status,
-            );
+    let mut host = HostLoop::new(h);
+    assert_eq!(unsafe { capsule_mpc_set_sampling(h, mode) }, CAPSULE_MPC_OK);
+    while host.t < 3.0 - 1e-9 {
+        if mode == CAPSULE_MPC_SAMPLING_IDEAL {
+            let rc = unsafe { capsule_mpc_feed_state(h, host.s.as_ptr(), 4) };
             assert_eq!(rc, CAPSULE_MPC_OK);
-            assert!(samples >= 1 && samples <= n);
-            for &u in &grads[..samples as usize] {
-                assert!(u.abs() <= u_max);
-                hold(&mut s, u);
-                t += dt;
-            }
+        } else {
+            host.track();
         }
+        host.actuate();
     }
-    s
+    host.s
 }
 
 #[test]
@@ -90,54 +130,27 @@ fn wrong_reset_is_reacquired_through_the_c_abi() {
     use capsule_mpc_runtime::controller::REACQUIRE_AFTER_REJECTIONS;
     let mut b = initialized();
     let h = handle(&mut b);
-    let (mut m, mut n, mut k, mut dt, mut u_max) = (0u32, 0u32, 0u32, 0.0, 0.0);
-    let mut grads = vec![0.0; 256];
-    let mut s = [0.0; 4];
-    let mut t = 0.0;
+    let mut host = HostLoop::new(h);
     let mut statuses = Vec::new();
     let mut reset_at = None;
-    unsafe {
-        assert_eq!(
-            capsule_mpc_dimensions(&mut m, &mut n, &mut k, &mut dt, &mut u_max),
-            CAPSULE_MPC_OK
-        );
-        assert_eq!(
-            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
-            CAPSULE_MPC_OK
-        );
-        while t < END_S - 1e-9 {
-            if reset_at.is_none() && t >= 0.5 {
-                let wrong = [s[0] + 0.015, s[2] - 0.012];
-                assert_eq!(capsule_mpc_reset(h, wrong.as_ptr(), 2), CAPSULE_MPC_OK);
-                reset_at = Some(statuses.len());
-            }
-            let z = [s[0], s[2]];
-            hold(&mut s, 0.0);
+    while host.t < END_S - 1e-9 {
+        if reset_at.is_none() && host.t >= 0.5 {
+            let wrong = [host.s[0] + 0.015, host.s[2] - 0.012];
             assert_eq!(
-                capsule_mpc_feed_tracking(h, z.as_ptr(), 2, t, 0),
+                unsafe { capsule_mpc_reset(h, wrong.as_ptr(), 2) },
                 CAPSULE_MPC_OK
             );
-            t += 0.02;
-            let (mut samples, mut status) = (0u32, -1i32);
-            let rc = capsule_mpc_next_actuation(
-                h,
-                t,
-                grads.as_mut_ptr(),
-                k as usize,
-                &mut samples,
-                &mut status,
-            );
-            assert_eq!(rc, CAPSULE_MPC_OK);
-            let mut last = -1;
-            assert_eq!(capsule_mpc_last_status(h, &mut last), CAPSULE_MPC_OK);
-            assert_eq!(last, status);
-            statuses.push(status);
-            for &u in &grads[..samples as usize] {
-                assert!(u.abs() <= u_max);
-                hold(&mut s, u);
-                t += dt;
-            }
+            reset_at = Some(statuses.len());
         }
+        host.track();
+        let status = host.actuate();
+        let mut last = -1;
+        assert_eq!(
+            unsafe { capsule_mpc_last_status(h, &mut last) },
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(last, status);
+        statuses.push(status);
     }
     let after = &statuses[reset_at.expect("reset happened")..];
     let n_reject = REACQUIRE_AFTER_REJECTIONS - 1;
@@ -152,6 +165,7 @@ fn wrong_reset_is_reacquired_through_the_c_abi() {
         !after[n_reject + 1..].contains(&CAPSULE_MPC_STATUS_REACQUIRED),
         "{after:?}"
     );
+    let s = host.s;
     let e1 = (s[0] - TARGET_C[0]).abs();
     let e2 = (s[2] - TARGET_C[2]).abs();
     assert!(e1 <= 1e-3 && e2 <= 1e-3, "final state {s:?}");

@@ -48,4 +48,4 @@ mod shape;
 mod writer;
 
 pub use run::*;
-pub use writer::{build_sequence, write_sequence_file, Sequence};
+pub use writer::{build_sequence, gradient_raster_steps, write_sequence_file, Sequence};

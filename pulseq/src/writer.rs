@@ -71,6 +71,13 @@ fn whole(
     }
 }
 
+/// The number of gradient raster times in `value_s`, or the writer's
+/// `OffRaster` error naming `what`: for callers that check a timing before
+/// they build a run (a time the writer would refuse later).
+pub fn gradient_raster_steps(what: &str, value_s: f64, raster_s: f64) -> Result<u64, PulseqError> {
+    whole(|| what.to_string(), value_s, raster_s, "gradient raster")
+}
+
 /// `value` must be finite and in `(lo, hi]`.
 fn check_range(name: &'static str, value: f64, lo: f64, hi: f64) -> Result<(), PulseqError> {
     if value.is_finite() && value > lo && value <= hi {

@@ -203,13 +203,11 @@ pub fn check_duration(duration_s: f64) -> Result<()> {
     Ok(())
 }
 
-/// Longest extra delay after tracking the runtime accepts, s.
-pub const MAX_EXTRA_DELAY_S: f64 = 1.0;
-
 /// The extra delay after each tracking phase must lie in
-/// `[0, MAX_EXTRA_DELAY_S]` s (the runtime refuses others); the error says
-/// the value and the range.
+/// `[0, MAX_EXTRA_DELAY_S]` s, the runtime's range (its error would only
+/// name the setting); the error says the value and the range.
 pub fn check_extra_delay(extra_delay_s: f64) -> Result<()> {
+    use capsule_mpc_runtime::controller::MAX_EXTRA_DELAY_S;
     if !(0.0..=MAX_EXTRA_DELAY_S).contains(&extra_delay_s) {
         bail!("extra delay {extra_delay_s} s is outside [0, {MAX_EXTRA_DELAY_S}] s");
     }

@@ -198,6 +198,10 @@ pub const TIME_TOLERANCE_S: f64 = 1.0e-3;
 /// modelled by about their mean, a change of length is followed within a
 /// few cycles.
 pub const GAP_SMOOTHING: f64 = 0.3;
+/// Longest tracking phase a setting may give, s.
+pub const MAX_TRACKING_TIME_S: f64 = 1.0;
+/// Longest extra delay after tracking a setting may give, s.
+pub const MAX_EXTRA_DELAY_S: f64 = 1.0;
 /// Speed below which a capsule counts as at rest, m/s (the settle
 /// tolerance): for the fallback's braking and the end game's restart from
 /// a fine stored plan (the emitted solver's `FINE_REST_SPEED_M_PER_S`).
@@ -272,10 +276,10 @@ pub(super) fn check_settings(
         return Err(RuntimeError::BadSetting("refine"));
     }
     let finite_nonneg = |v: f64| v.is_finite() && v >= 0.0;
-    if !finite_nonneg(s.tracking_time_s) || s.tracking_time_s > 1.0 {
+    if !finite_nonneg(s.tracking_time_s) || s.tracking_time_s > MAX_TRACKING_TIME_S {
         return Err(RuntimeError::BadSetting("tracking_time_s"));
     }
-    if !finite_nonneg(s.extra_delay_s) || s.extra_delay_s > 1.0 {
+    if !finite_nonneg(s.extra_delay_s) || s.extra_delay_s > MAX_EXTRA_DELAY_S {
         return Err(RuntimeError::BadSetting("extra_delay_s"));
     }
     if !finite_nonneg(s.position_noise_m) || s.position_noise_m > 0.1 {
