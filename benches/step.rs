@@ -7,7 +7,8 @@
 use capsule_mpc::bench::harness::prototype_controller;
 use capsule_mpc::bench::reference::{ActiveSetEngine, QpEngine, RefProblem, RefSolver};
 use capsule_mpc_generator::config::Config;
-use capsule_mpc_runtime::generated::controller::{solver, spec};
+use capsule_mpc_runtime::generated::controller::{spec, Solver};
+use capsule_mpc_runtime::solver::PlanSolver;
 use criterion::{black_box, criterion_group, criterion_main, BatchSize, Criterion};
 
 /// Relative states: early in scenario C's manoeuvre (fast), and a uniform one.
@@ -22,9 +23,9 @@ fn benches(c: &mut Criterion) {
     let problem = RefProblem::from_config(&Config::embedded_default()).expect("config");
     for (name, e) in STATES {
         // Warm case: first solve, then the next state after one sample.
-        let mut warm_solver = solver::Solver::new();
+        let mut warm_solver = Solver::new();
         warm_solver.solve(&e);
-        let e1 = solver::predict(&e, warm_solver.plan(), 1);
+        let e1 = Solver::predict_plan(&e, warm_solver.plan(), 1);
         warm_solver.shift(1);
         let mut warm_ctl = proto.clone();
         warm_ctl.cycle_full_state(&e).expect("cycle");

@@ -375,7 +375,8 @@ fn short_moves_settle_within_the_issue_deadlines() {
 
 /// Where the issue's settling thresholds are NOT met, the measured worst
 /// cases (margin about 0.1 s), so that a regression shows and an
-/// improvement can tighten them (README, "Acceptance over the workspace"):
+/// improvement can tighten them (docs/results.md, "Acceptance over the
+/// workspace"):
 /// minimum time of 1 s or more (far and chained moves): constant sampling
 /// worst 0.53 s over bound + 1.5 s ((-5, 2) cm, constant bias, seed 1);
 /// variable sampling worst 0.54 s over bound + 1.0 s ((5, 5) cm, constant
@@ -433,7 +434,7 @@ fn measured_worst_settling_where_the_issue_thresholds_fail() {
 /// Met under the random and drifting disturbances (the hold's
 /// station-keeping dither holds the capsules' relative position through
 /// drag): asserted for every such run. NOT met under a constant bias
-/// (README, Known limits: inside the band drag gives less relative
+/// (docs/known-limits.md: inside the band drag gives less relative
 /// acceleration than the bias's relative part, so the capsules drift apart
 /// and a brief drag manoeuvre out of the band corrects them): asserted,
 /// the measured worst fractions with a margin of 0.05.

@@ -7,8 +7,8 @@
 
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_runtime::controller::{Refine, Sampling as RtSampling};
-use capsule_mpc_runtime::generated::controller::{solver, spec};
-use capsule_mpc_runtime::generated::Tier;
+use capsule_mpc_runtime::generated::controller::{spec, Solver};
+use capsule_mpc_runtime::solver::Tier;
 use capsule_mpc_runtime::DefaultController;
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling, Scenario};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -157,7 +157,7 @@ fn controller_cycles_do_not_allocate() {
         }
 
         // The generated solver alone.
-        let mut s = solver::Solver::new();
+        let mut s = Solver::new();
         let (_, n) = counted(|| {
             for x in &rows {
                 let e = relative(x, &target);
@@ -212,7 +212,7 @@ fn both_tiers_do_not_allocate() {
             explicit_cycles > 50,
             "the explicit tier produced only {explicit_cycles} plans"
         );
-        let mut s = solver::Solver::new();
+        let mut s = Solver::new();
         let (_, n) = counted(|| {
             for x in &rows {
                 let e = relative(x, &target);

@@ -137,7 +137,7 @@ fn scanner_runs(
 /// disturbance differs per capsule; near rest one gradient separates them
 /// only through drag, at under 2e-4 m/s^2 inside the band), leave the band
 /// at 2.84 s and settle again at 3.19 s after one differential swing
-/// (README, Known limits; 2.95 s before the dither, which slows the drift
+/// (docs/known-limits.md; 2.95 s before the dither, which slows the drift
 /// and so delays the swing). Asserted: every run arrives within 2.0 s and
 /// ends within 1 mm; every run but that one settles within 2.0 s, that one
 /// within 3.25 s.

@@ -11,10 +11,16 @@ use capsule_mpc_generator::explicit::{
     build_explicit, dense_hessian, reference_box_qp, ExplicitTables, PlanSource,
 };
 use capsule_mpc_generator::tables::Tables;
-use capsule_mpc_runtime::generated::controller::{
-    explicit, explicit_tables, lookup, qp, solver, spec, tables,
-};
-use capsule_mpc_runtime::generated::{SolveStatus, Tier};
+use capsule_mpc_runtime::generated::controller::spec::{K, M, NX};
+use capsule_mpc_runtime::generated::controller::Spec;
+use capsule_mpc_runtime::generated::controller::{spec, Solver, TABLES};
+use capsule_mpc_runtime::solver::explicit::{self, explicit_state, ExplicitSample};
+use capsule_mpc_runtime::solver::format::SCALAR_COAST_S as COAST;
+use capsule_mpc_runtime::solver::format::{Section, NO_SLOT};
+use capsule_mpc_runtime::solver::qp::BoxQp;
+use capsule_mpc_runtime::solver::rollout::rollout_cost;
+use capsule_mpc_runtime::solver::tables::PlanSet;
+use capsule_mpc_runtime::solver::{lookup, PlanSolver, SolveStatus, Tier};
 use rand::{Rng, SeedableRng};
 use std::path::Path;
 use std::sync::OnceLock;
@@ -25,42 +31,66 @@ fn generator_explicit() -> &'static ExplicitTables {
     static DATA: OnceLock<ExplicitTables> = OnceLock::new();
     DATA.get_or_init(|| {
         let config = Config::embedded_default();
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("generated/tables.bin");
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("generated/controller.tables.bin");
         let tables = Tables::read(&path, &config).expect("committed tables read");
         build_explicit(&config, &tables)
     })
 }
 
-fn stored_row(source: PlanSource, plan: usize) -> &'static [f64; spec::K] {
-    match source {
-        PlanSource::Main => &tables::PLAN_U[plan],
-        PlanSource::Coasted => &tables::COASTED_PLAN_U[plan],
-        PlanSource::Fine => &tables::FINE_PLAN_U[plan],
-        PlanSource::CoastedFine => &tables::COASTED_FINE_PLAN_U[plan],
-    }
+fn stored_row(source: PlanSource, plan: usize) -> [f64; spec::K] {
+    let set = match source {
+        PlanSource::Main => PlanSet::BackToBack,
+        PlanSource::Coasted => PlanSet::Coasted,
+        PlanSource::Fine => PlanSet::Fine,
+        PlanSource::CoastedFine => PlanSet::CoastedFine,
+    };
+    std::array::from_fn(|k| TABLES.plan_u(set, plan, k))
+}
+
+/// The emitted table file's kept index cells, slots and sample states.
+fn index_cells() -> Vec<u64> {
+    (0..TABLES.cell_count)
+        .map(|c| TABLES.u64_at(Section::IndexCells, c))
+        .collect()
+}
+
+fn slots(section: Section) -> Vec<u16> {
+    (0..TABLES.elements(section))
+        .map(|c| TABLES.u16_at(section, c))
+        .collect()
+}
+
+fn sample_state(slot: usize) -> [f64; spec::NX] {
+    std::array::from_fn(|j| explicit_state(&TABLES, slot, j))
 }
 
 #[test]
 fn the_emitted_samples_are_the_generators() {
     let g = generator_explicit();
-    assert_eq!(g.samples.len(), explicit_tables::EXPLICIT_COUNT);
-    assert_eq!(&g.index_slot[..], &explicit_tables::EXPLICIT_INDEX_SLOT[..]);
+    assert_eq!(g.samples.len(), TABLES.explicit_count);
+    assert_eq!(g.index_slot, slots(Section::ExplicitIndexSlot));
     assert_eq!(
-        &g.coasted_index_slot[..],
-        &explicit_tables::COASTED_EXPLICIT_INDEX_SLOT[..]
+        g.coasted_index_slot,
+        slots(Section::CoastedExplicitIndexSlot)
     );
-    for ((s, e), state) in g
-        .samples
-        .iter()
-        .zip(explicit_tables::EXPLICIT.iter())
-        .zip(explicit_tables::EXPLICIT_STATE.iter())
-    {
-        assert_eq!(&s.state[..], &state[..]);
-        assert_eq!(s.source as u8, e.source);
-        assert_eq!((s.plan, s.offset), (e.plan as usize, e.offset as usize));
-        assert_eq!(&s.hessian[..], &e.hessian[..]);
-        assert_eq!(&s.gradient[..], &e.gradient[..]);
-        assert_eq!(&s.active[..], &e.active[..]);
+    assert_eq!(g.fine_slot, slots(Section::FineExplicitSlot));
+    assert_eq!(g.coasted_fine_slot, slots(Section::CoastedFineExplicitSlot));
+    for (slot, s) in g.samples.iter().enumerate() {
+        let e = ExplicitSample::get(&TABLES, slot).expect("stored sample");
+        assert_eq!(&s.state[..], &sample_state(slot)[..]);
+        assert_eq!(s.source as u8, e.source());
+        assert_eq!((s.plan, s.offset), (e.plan() as usize, e.offset() as usize));
+        assert_eq!(s.next, e.next());
+        let hessian: Vec<f64> = (0..s.hessian.len()).map(|i| e.hessian(i)).collect();
+        assert_eq!(s.hessian, hessian);
+        let gradient: Vec<f64> = (0..spec::N).map(|a| e.gradient(a)).collect();
+        assert_eq!(s.gradient, gradient);
+        let sensitivity: Vec<f64> = (0..spec::N * spec::NX)
+            .map(|i| e.sensitivity(i / spec::NX, i % spec::NX))
+            .collect();
+        assert_eq!(s.sensitivity, sensitivity);
+        assert_eq!(s.cost, e.cost());
+        assert_eq!(&s.active[..], &e.active::<{ spec::N }>()[..]);
     }
 }
 
@@ -73,27 +103,21 @@ fn the_emitted_samples_are_the_generators() {
 #[test]
 fn explicit_lookup_matches_a_reference_over_the_kept_cells() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
-    let axis = |j: usize| {
-        if j.is_multiple_of(2) {
-            tables::INDEX_POSITION_AXIS
-        } else {
-            tables::INDEX_SPEED_AXIS
-        }
-    };
+    let axis = |j: usize| lookup::index_axis(&TABLES, j);
+    let kept_cells = index_cells();
+    let (slots_b2b, slots_coasted) = (
+        slots(Section::ExplicitIndexSlot),
+        slots(Section::CoastedExplicitIndexSlot),
+    );
     let (mut found, mut not_kept, mut neighbours_only) = (0, 0, 0);
     for t in 0..20_000 {
         let coasted = t % 2 == 1;
-        let slots: &[u16] = if coasted {
-            &explicit_tables::COASTED_EXPLICIT_INDEX_SLOT
-        } else {
-            &explicit_tables::EXPLICIT_INDEX_SLOT
-        };
+        let slots: &[u16] = if coasted { &slots_coasted } else { &slots_b2b };
         // Half the states near a stored sample (where the kept cells are),
         // half anywhere on the grid.
         let mut e = [0.0; spec::NX];
         if t % 4 < 2 {
-            let state =
-                &explicit_tables::EXPLICIT_STATE[rng.gen_range(0..explicit_tables::EXPLICIT_COUNT)];
+            let state = sample_state(rng.gen_range(0..TABLES.explicit_count));
             for j in 0..spec::NX {
                 e[j] = state[j] + rng.gen_range(-1.5..1.5) * axis(j).step;
             }
@@ -110,7 +134,7 @@ fn explicit_lookup_matches_a_reference_over_the_kept_cells() {
         let idx: Option<Vec<usize>> = (0..spec::NX)
             .map(|j| lookup::axis_nearest(&axis(j), e[j]))
             .collect();
-        let got = explicit::explicit_slot(&e, coasted, usize::MAX);
+        let got = explicit::explicit_slot(&TABLES, &e, coasted, usize::MAX);
         let Some(idx) = idx else {
             assert_eq!(got, None, "outside the grid at {e:?}");
             continue;
@@ -136,17 +160,17 @@ fn explicit_lookup_matches_a_reference_over_the_kept_cells() {
         }
         let (mut best, mut best_d) = (None, f64::INFINITY);
         for (i, c) in cells.iter().enumerate() {
-            let Ok(kept) = tables::INDEX_CELLS.binary_search(&flat_of(c)) else {
+            let Ok(kept) = kept_cells.binary_search(&flat_of(c)) else {
                 if i == 0 {
                     not_kept += 1;
                 }
                 continue;
             };
             let slot = slots[kept];
-            if slot == explicit_tables::NO_SLOT {
+            if slot == NO_SLOT {
                 continue;
             }
-            let st = &explicit_tables::EXPLICIT_STATE[slot as usize];
+            let st = sample_state(slot as usize);
             let d: f64 = (0..spec::NX)
                 .map(|j| ((e[j] - st[j]) / axis(j).step).powi(2))
                 .sum();
@@ -158,7 +182,7 @@ fn explicit_lookup_matches_a_reference_over_the_kept_cells() {
         assert_eq!(got, best, "at {e:?}");
         if got.is_some() {
             found += 1;
-            if tables::INDEX_CELLS.binary_search(&flat_of(&idx)).is_err() {
+            if kept_cells.binary_search(&flat_of(&idx)).is_err() {
                 neighbours_only += 1;
             }
         }
@@ -178,7 +202,7 @@ fn explicit_lookup_matches_a_reference_over_the_kept_cells() {
 fn explicit_plan_matches_clarabel_on_the_stored_qp() {
     let g = generator_explicit();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(15);
-    let mut qp = qp::BoxQp::new();
+    let mut qp = BoxQp::<{ spec::N }>::new(spec::QP_MAX_ITERATIONS, spec::QP_MULTIPLIER_TOLERANCE);
     let mut plan = [0.0; spec::K];
     let (mut checked, mut worst) = (0, 0.0_f64);
     for _ in 0..400 {
@@ -188,19 +212,28 @@ fn explicit_plan_matches_clarabel_on_the_stored_qp() {
         let mut e = [0.0; spec::NX];
         for j in 0..spec::NX {
             let half = if j % 2 == 0 {
-                0.5 * tables::INDEX_POSITION_AXIS.step
+                0.5 * TABLES.index_position_axis.step
             } else {
-                0.5 * tables::INDEX_SPEED_AXIS.step
+                0.5 * TABLES.index_speed_axis.step
             };
             e[j] = s.state[j] + rng.gen_range(-half..half);
         }
         // The sample the runtime takes for e may be another: compare on the
         // one it takes.
-        let Some(used) = explicit::explicit_slot(&e, coasted, usize::MAX) else {
+        let Some(used) = explicit::explicit_slot(&TABLES, &e, coasted, usize::MAX) else {
             continue;
         };
-        let out = explicit::explicit_plan(&e, coasted, usize::MAX, None, &mut qp, &mut plan)
-            .expect("in range");
+        let out = explicit::explicit_plan(
+            &TABLES,
+            spec::U_MAX_T_PER_M,
+            &e,
+            coasted,
+            usize::MAX,
+            None,
+            &mut qp,
+            &mut plan,
+        )
+        .expect("in range");
         assert_eq!(out.slot, used);
         assert!(out.converged, "QP did not converge at slot {used}");
         let s = &g.samples[used];
@@ -272,15 +305,15 @@ fn refinement_never_raises_the_true_cost() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(16);
     let schedules = [
         (spec::K, 0.0),
-        (1, tables::COAST_S),
-        (spec::N, tables::COAST_S),
+        (1, TABLES.scalar(COAST)),
+        (spec::N, TABLES.scalar(COAST)),
     ];
     let mut compared = 0;
     let mut refined_won = 0;
     for t in 0..600 {
         let (samples, coast) = schedules[t % 3];
-        let sched = solver::Schedule::new(samples, coast);
-        let mut s = solver::Solver::new();
+        let sched = Solver::schedule_for(samples, coast);
+        let mut s = Solver::new();
         s.set_schedule(samples, coast);
         let mut e = [0.0; spec::NX];
         for j in 0..spec::NX {
@@ -299,9 +332,9 @@ fn refinement_never_raises_the_true_cost() {
         if x.status == SolveStatus::OutOfRange {
             continue;
         }
-        let explicit_cost = solver::rollout_cost(&e, s.explicit_plan(), &sched);
+        let explicit_cost = rollout_cost::<Spec, M, NX, K>(&e, s.explicit_plan(), &sched);
         let r = s.solve(&e);
-        let refined_cost = solver::rollout_cost(&e, s.plan(), &sched);
+        let refined_cost = rollout_cost::<Spec, M, NX, K>(&e, s.plan(), &sched);
         assert_eq!(
             r.cost, refined_cost,
             "the report's cost is the plan's true cost"
@@ -333,7 +366,7 @@ fn refinement_never_raises_the_true_cost() {
 #[test]
 fn certified_operation_bound_covers_the_bench_states() {
     use capsule_mpc_generator::explicit::explicit_step_ops;
-    let certified = explicit_tables::EXPLICIT_CERTIFIED_OPS;
+    let certified = <Solver as PlanSolver<{ spec::NX }, { spec::K }>>::EXPLICIT_CERTIFIED_OPS;
     assert_eq!(
         certified,
         explicit_step_ops(spec::N, spec::NX, spec::K, spec::QP_MAX_ITERATIONS)
@@ -342,12 +375,12 @@ fn certified_operation_bound_covers_the_bench_states() {
     let states = capsule_mpc::bench::states::sample_states(&config, 20_000, 1).expect("states");
     let (mut solved, mut most) = (0, 0u32);
     for st in &states {
-        let mut s = solver::Solver::new();
+        let mut s = Solver::new();
         if s.solve_explicit(&st.e).status == SolveStatus::OutOfRange {
             continue;
         }
         s.adopt_explicit();
-        let e1 = solver::predict(&st.e, s.plan(), 1);
+        let e1 = Solver::predict_plan(&st.e, s.plan(), 1);
         s.shift(1);
         for r in [s.solve_explicit(&st.e), s.solve_explicit(&e1)] {
             if r.status == SolveStatus::OutOfRange {
@@ -371,8 +404,8 @@ fn certified_operation_bound_covers_the_bench_states() {
     );
 }
 
-/// The explicit tier alone in the closed loop, as measured (README "Two
-/// tiers"): ideal sampling, no disturbance. On the sparse index (each kept
+/// The explicit tier alone in the closed loop, as measured (docs/results.md,
+/// "The explicit tier alone"): ideal sampling, no disturbance. On the sparse index (each kept
 /// cell's sample chosen among the samples of its neighbourhood) A's end
 /// game cycled through stored samples (speeds up to 0.15 m/s, 0.75 mm off
 /// at 3 s) until the shortest main-grid plans were finished with one

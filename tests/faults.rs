@@ -11,10 +11,10 @@ use capsule_mpc_runtime::controller::{
     braking_gradient, ControllerSettings, Sampling, SwitchingRule, BRAKING_HORIZON_S,
     MAX_ABS_SPEED_M_PER_S, REACQUIRE_AFTER_REJECTIONS,
 };
-use capsule_mpc_runtime::generated::controller::lookup;
-use capsule_mpc_runtime::generated::controller::solver::{self, Schedule, Solver};
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
-use capsule_mpc_runtime::generated::{PlanSolver, SolveStatus};
+use capsule_mpc_runtime::generated::controller::{Solver, Spec, TABLES};
+use capsule_mpc_runtime::solver::rollout::rollout_cost;
+use capsule_mpc_runtime::solver::{lookup, PlanSolver, Schedule, SolveStatus};
 use capsule_mpc_runtime::{CycleOutput, DefaultController, RuntimeError, RuntimeStatus};
 use capsule_mpc_sim::plant::{DisturbanceLevel, Phase, Plant};
 use rand::{Rng, SeedableRng};
@@ -465,7 +465,7 @@ fn solve_above_the_offline_iteration_map_is_flagged() {
         let mut c = proto.clone();
         let out = c.cycle_full_state(&e).unwrap();
         let report = out.solve.expect("a solve report");
-        let measured = lookup::qp_iterations_measured(&e);
+        let measured = Solver::qp_iterations_measured(&e);
         let above = measured > 0 && report.max_qp_iterations > measured;
         // The flag is exactly "above the map" (when nothing else is wrong).
         if report.status == SolveStatus::Refined {
@@ -515,7 +515,8 @@ fn iteration_limit_is_flagged_with_a_finite_bounded_plan() {
     let mut s = Solver::new();
     let direct = s.solve(&e);
     assert_eq!(direct.status, SolveStatus::IterationLimit);
-    let played_cost = solver::rollout_cost(&e, &out.gradients_t_per_m, &Schedule::BACK_TO_BACK);
+    let played_cost =
+        rollout_cost::<Spec, M, NX, K>(&e, &out.gradients_t_per_m, &Schedule::BACK_TO_BACK);
     assert!(
         played_cost <= direct.cost * (1.0 + 1e-12),
         "played {played_cost} > refined {}",
@@ -524,12 +525,12 @@ fn iteration_limit_is_flagged_with_a_finite_bounded_plan() {
     assert!(out.gradients_t_per_m.iter().any(|&u| u != 0.0));
     // ... and it is no worse than the stored plan the solve started from.
     let mut table = [0.0; K];
-    lookup::lookup_tail(&e, &mut table).expect("state inside the index");
-    let table_cost = solver::rollout_cost(&e, &table, &Schedule::BACK_TO_BACK);
+    lookup::lookup_tail(&TABLES, &e, &mut table).expect("state inside the index");
+    let table_cost = rollout_cost::<Spec, M, NX, K>(&e, &table, &Schedule::BACK_TO_BACK);
     assert!(report.cost <= table_cost, "{} > {table_cost}", report.cost);
 
     // The loop goes on: the next cycle from the predicted state is usable.
-    let e1 = solver::predict(&e, &out.gradients_t_per_m, 1);
+    let e1 = Solver::predict_plan(&e, &out.gradients_t_per_m, 1);
     let next = c.cycle_full_state(&e1).unwrap();
     assert_safe(&next, "after the iteration limit");
     assert_ne!(next.status, RuntimeStatus::Fallback);

@@ -97,7 +97,7 @@ fn all_figures_rejects_a_non_positive_duration() {
     assert!(all_figures(dir.path(), f64::NAN).is_err());
 }
 
-/// The README shows the committed figures in `docs/figures/`: their numbers
+/// docs/results.md shows the committed figures in `docs/figures/`: their numbers
 /// must be what the current code produces (regenerate with
 /// `capsule-mpc figures --out docs/figures` when the controller changes).
 #[test]

@@ -4,7 +4,7 @@
 
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::generate::{
-    differences, generate, generate_module, write_atomically, ControllerModule,
+    differences, emit_module_files, generate, write_atomically, ControllerModule,
 };
 use capsule_mpc_generator::tables::{Silent, TableError, Tables};
 use std::path::Path;
@@ -28,42 +28,40 @@ fn copy_tree(from: &Path, to: &Path, entries: &[&str]) {
     }
 }
 
+/// The full regenerate-and-compare (`capsule-mpc generate --check`, both
+/// modules) solves every table again and takes minutes: it is its own
+/// `.ci/run` step. Here, in seconds: the committed crate is what the
+/// emitter writes from the committed tables (bindings, summaries, the
+/// explicit tier rebuilt from the plans, the table files byte for byte),
+/// and the committed QP iteration map is the one the compiled solver
+/// measures on them.
 #[test]
-fn committed_generated_crate_matches_a_fresh_generation() {
-    let mut files = generate(&Config::embedded_default(), &Silent).unwrap();
-    // The committed QP iteration map is what the compiled solver measures.
-    let measured = capsule_mpc_sim::qp_map::fill_if_compiled(&mut files).unwrap();
-    assert!(
-        measured,
-        "run `capsule-mpc generate`: src/controller.rs differs"
-    );
-    let diff = differences(Path::new("generated"), &files);
-    assert!(
-        diff.is_empty(),
-        "run `capsule-mpc generate`: {diff:?} differ"
-    );
-}
-
-/// The shipped three-capsule module too (about 3 min of the CI run on two
-/// cores: 343 grid plans and 125 fine plans per schedule).
-#[test]
-fn committed_three_capsule_module_matches_a_fresh_generation() {
-    let module = ControllerModule::ThreeCapsules;
-    let files = generate_module(module, &module.default_config(), &Silent).unwrap();
-    let diff = differences(Path::new("generated"), &files);
-    assert!(
-        diff.is_empty(),
-        "run `capsule-mpc generate --module three-capsules`: {diff:?} differ"
-    );
+fn committed_generated_crate_re_emits_from_its_own_tables() {
+    for module in ControllerModule::ALL {
+        let config = module.default_config();
+        let tables =
+            Tables::read(&Path::new("generated").join(module.tables_path()), &config).unwrap();
+        let mut files = emit_module_files(module, &config, tables).unwrap();
+        if module == ControllerModule::Controller {
+            let measured = capsule_mpc_sim::qp_map::fill_if_compiled(&mut files).unwrap();
+            assert!(measured, "the compiled controller is not the committed one");
+        }
+        let diff = differences(Path::new("generated"), &files);
+        assert!(
+            diff.is_empty(),
+            "run `capsule-mpc generate --module {} --reuse-tables`: {diff:?} differ",
+            module.cli_name()
+        );
+    }
 }
 
 #[test]
 fn committed_tables_refuse_another_config() {
     let mut other = Config::embedded_default();
     other.capsule[0].sphere_radius_m = 0.001;
-    let err = Tables::read(Path::new("generated/tables.bin"), &other).unwrap_err();
+    let err = Tables::read(Path::new("generated/controller.tables.bin"), &other).unwrap_err();
     assert!(err.to_string().contains("different config"), "{err}");
-    let bytes = std::fs::read("generated/tables.bin").unwrap();
+    let bytes = std::fs::read("generated/controller.tables.bin").unwrap();
     let err =
         Tables::from_bytes(&bytes[..bytes.len() / 2], &Config::embedded_default()).unwrap_err();
     assert!(err.to_string().contains("truncated or corrupted"), "{err}");
@@ -93,23 +91,25 @@ fn regenerated_solver_for_new_capsules_closes_the_loop() {
     let here = Path::new(env!("CARGO_MANIFEST_DIR"));
     // Only the `controller` module is regenerated; the shipped three-capsule
     // module (which lib.rs declares) stays as committed, as in a checkout.
-    for rel in ["src/three_capsules.rs", "three_capsules.tables.bin"] {
+    for rel in [
+        "src/three_capsules.rs",
+        "three_capsules.tables.bin",
+        "three_capsules.tables.txt",
+    ] {
         std::fs::copy(
             here.join("generated").join(rel),
             root.join("generated").join(rel),
         )
         .unwrap();
     }
-    // The runtime as shipped, pointed at the new generated crate.
-    copy_tree(
-        &here.join("runtime"),
-        &root.join("runtime"),
-        &["Cargo.toml", "src"],
-    );
+    // The solver and the runtime as shipped, pointed at the new generated crate.
+    for krate in ["solver", "runtime"] {
+        copy_tree(&here.join(krate), &root.join(krate), &["Cargo.toml", "src"]);
+    }
     std::fs::create_dir_all(root.join("probe/src")).unwrap();
     std::fs::write(
         root.join("Cargo.toml"),
-        "[workspace]\nmembers = [\"generated\", \"runtime\", \"probe\"]\nresolver = \"2\"\n\
+        "[workspace]\nmembers = [\"solver\", \"generated\", \"runtime\", \"probe\"]\nresolver = \"2\"\n\
          [workspace.package]\nversion = \"0.1.0\"\nedition = \"2021\"\nlicense = \"MIT\"\n",
     )
     .unwrap();

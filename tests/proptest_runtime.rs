@@ -13,9 +13,9 @@ use capsule_mpc_runtime::controller::{
     braking_gradient, ControllerSettings, Sampling, SwitchingRule, MAX_ABS_POSITION_M,
     MAX_ABS_SPEED_M_PER_S, MAX_CYCLE_GAP_S, SETTING_NAMES, TIME_TOLERANCE_S,
 };
-use capsule_mpc_runtime::generated::controller::solver::Solver;
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
-use capsule_mpc_runtime::generated::PlanSolver;
+use capsule_mpc_runtime::generated::controller::Solver;
+use capsule_mpc_runtime::solver::PlanSolver;
 use capsule_mpc_runtime::{CycleOutput, DefaultController, RuntimeError, RuntimeStatus};
 use capsule_mpc_sim::plant::{DisturbanceLevel, Phase, Plant};
 use proptest::prelude::*;

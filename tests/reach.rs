@@ -150,7 +150,7 @@ fn far_moves_across_the_workspace_settle_under_every_sampling() {
                 m.min_time_bound_s
             );
             // Arrival, held 1 s (the relative drift can take the capsules
-            // out of the band seconds later: README, Known limits).
+            // out of the band seconds later: docs/known-limits.md).
             let settle = m
                 .settle_held_s
                 .unwrap_or_else(|| panic!("{start:?} -> {target:?} {sampling:?}: {m:?}"));
@@ -209,7 +209,7 @@ fn a_target_changed_mid_run_is_reached_from_the_moving_state() {
             // Arrival held 1 s, then station keeping: the capsules' relative
             // drift (a few tenths of a mm/s left at arrival) takes them out
             // of the band every several seconds for one differential swing
-            // (README, Known limits), so a 10 s run can end mid-swing;
+            // (docs/known-limits.md), so a 10 s run can end mid-swing;
             // asserted is the arrival and 80 % of the time in the band
             // after it.
             let arrived = m

@@ -18,7 +18,7 @@
 //! no later than 3 s after the last bad frame and stays in it for at least
 //! `HELD_S` = 1 s. Asking it to stay until an arbitrary run end instead
 //! measures station keeping, which is not indefinite with these capsules
-//! (README, Known limits: the hold's relative drift reaches 1 mm after a
+//! (docs/known-limits.md: the hold's relative drift reaches 1 mm after a
 //! few seconds and the correction leaves the band briefly); the grids
 //! print that strict count too, next to the same count for runs without a
 //! glitch.
@@ -354,7 +354,7 @@ fn glitches_settle_again_variable_sampling() {
 /// glitch: every one is rejected, and the run is exactly the run in which
 /// those frames were lost (same plant state to the last bit). Settled again
 /// within 3 s for the grid's seeds 1 and 2; seed 3 drifts out of the band
-/// during the hold in both runs (station keeping, README Known limits).
+/// during the hold in both runs (station keeping, docs/known-limits.md).
 #[test]
 fn five_cm_glitch_for_ten_frames_after_settling_is_rejected() {
     for sampling in [Sampling::Constant, Sampling::Variable] {
@@ -536,8 +536,8 @@ fn the_estimate_is_predicted_through_the_real_gap() {
     let t_b = b.actuation_end_s().unwrap();
     let out_a = a.cycle_at(Some(&za), t_a, t_a + 0.06).unwrap();
     let out_b = b.cycle_at(Some(&zb), t_b, t_b + 0.02).unwrap();
-    use capsule_mpc_runtime::generated::PlanSolver;
-    type S = capsule_mpc_runtime::generated::controller::solver::Solver;
+    use capsule_mpc_runtime::solver::PlanSolver;
+    type S = capsule_mpc_runtime::generated::controller::Solver;
     let expect_a = <S as PlanSolver<NX, K>>::predict_constant(&moving_a, 0.0, 0.06);
     let expect_b = <S as PlanSolver<NX, K>>::predict_constant(&moving_b, 0.0, 0.02);
     for j in 0..NX {
@@ -719,7 +719,7 @@ fn fallback_brakes_then_the_controller_plans_again() {
         }
         // At rest near the target (the 1 mm band is not always held: a
         // relative error of 1-2 mm at rest can sit below the tables' 5 mm
-        // grid, README Known limits).
+        // grid, docs/known-limits.md).
         for i in 0..M {
             assert!((x[2 * i] - target[2 * i]).abs() <= 3e-3, "{what}");
             assert!(x[2 * i + 1].abs() < 5e-3, "{what}");

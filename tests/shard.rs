@@ -44,11 +44,11 @@ fn sharded_bytes(config: &Config, n: impl Fn(usize) -> usize) -> Vec<u8> {
         let new = run_round(config, r, n(r), &parts, dir.path());
         parts.extend(new);
     }
-    merge_parts(config, &parts).unwrap().to_bytes()
+    merge_parts(config, &parts).unwrap().to_bytes(config, None)
 }
 
 fn assert_merge_matches(config: &Config) {
-    let single = build_tables(config, &Silent).to_bytes();
+    let single = build_tables(config, &Silent).to_bytes(config, None);
     for n in [1, 3, 4] {
         let merged = sharded_bytes(config, |_| n);
         assert!(merged == single, "{n} shards: merged tables differ");
@@ -60,7 +60,7 @@ fn merged_tables_match_the_single_process_run_for_two_capsules() {
     let config = config("shard-m2.toml");
     assert_merge_matches(&config);
     // Each round may use its own shard count.
-    let single = build_tables(&config, &Silent).to_bytes();
+    let single = build_tables(&config, &Silent).to_bytes(&config, None);
     assert!(
         sharded_bytes(&config, |r| 1 + r % 4) == single,
         "mixed shard counts"

@@ -78,24 +78,23 @@ fn each_config_runs_on_its_own_compiled_controller() {
     );
 }
 
-/// The three-capsule module has no explicit tier (README, "Two tiers"):
+/// The three-capsule module has no explicit tier (docs/three-capsules.md):
 /// `refine = none` is refused for it with the runtime's `BadSetting`, named
 /// in the error; the refinement runs. The `refine` setting does not select
 /// the compiled module (it is a runtime setting, not in the solver hash).
 #[test]
 fn the_three_capsule_module_has_no_explicit_tier() {
     use capsule_mpc_generator::config::RefineMode;
-    use capsule_mpc_runtime::generated::PlanSolver;
+    use capsule_mpc_runtime::solver::PlanSolver;
     use capsule_mpc_runtime::{Controller, RuntimeError};
-    type Three = three_capsules::solver::Solver;
+    type Three = three_capsules::Solver;
     const NX: usize = three_capsules::spec::NX;
     const K: usize = three_capsules::spec::K;
     const { assert!(!<Three as PlanSolver<NX, K>>::HAS_EXPLICIT_TIER) };
-    assert_eq!(three_capsules::explicit_tables::EXPLICIT_COUNT, 0);
-    assert!(three_capsules::explicit_tables::EXPLICIT_INDEX_SLOT.is_empty());
+    assert_eq!(three_capsules::TABLES.explicit_count, 0);
     const {
         assert!(
-            <controller::solver::Solver as PlanSolver<
+            <controller::Solver as PlanSolver<
                 { controller::spec::NX },
                 { controller::spec::K },
             >>::HAS_EXPLICIT_TIER
@@ -158,7 +157,7 @@ fn a_config_with_no_compiled_controller_says_how_to_generate_one() {
 /// settled (in the band, held 1 s). Issue 16 asks for 1.5 s; the minimum-time
 /// bound itself exceeds 1.5 s for 144 of these targets (three capsules
 /// separate only through their drag differences), and the end game loses
-/// time to relative drift (README, "Three capsules"). Measured: median
+/// time to relative drift (docs/known-limits.md, "Three capsules"). Measured: median
 /// 1.56 s (1.71 s before the centred hold), worst 5.35 s (5.69 s before
 /// the clamped fine plan); asserted: median
 /// <= 1.7 s, every target within the
@@ -203,8 +202,8 @@ fn off_grid_targets_settle() {
 /// Constant and variable sampling with 0.2 mm noise and the paper's
 /// disturbance, seeds 1-4, over targets spread through the workspace
 /// (corners, faces, the issue's (1, 1, 1) cm, mixed directions). Issue 16
-/// asks for every run within 3 s, which is not met (README, "Three
-/// capsules"): measured, of 40 runs each, constant sampling 34 settle in the
+/// asks for every run within 3 s, which is not met (docs/known-limits.md,
+/// "Three capsules"): measured, of 40 runs each, constant sampling 34 settle in the
 /// 8 s run (17 within 3 s, median 3.19 s), variable 31 (17 within 3 s,
 /// median 2.76 s); the separations (3, -3, 3) and (-3, 3, 0) cm do not
 /// settle for most seeds. Asserted as a floor against regressions: at
@@ -275,17 +274,17 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
 fn the_sparse_index_scales_with_the_plans() {
     let dense = |pos: usize, spd: usize, m: u32| (pos * spd).pow(m);
     let dense3 = dense(
-        three_capsules::tables::INDEX_POSITION_AXIS.count,
-        three_capsules::tables::INDEX_SPEED_AXIS.count,
+        three_capsules::TABLES.index_position_axis.count,
+        three_capsules::TABLES.index_speed_axis.count,
         3,
     );
-    let kept3 = three_capsules::tables::INDEX_CELLS.len();
+    let kept3 = three_capsules::TABLES.cell_count;
     let dense2 = dense(
-        controller::tables::INDEX_POSITION_AXIS.count,
-        controller::tables::INDEX_SPEED_AXIS.count,
+        controller::TABLES.index_position_axis.count,
+        controller::TABLES.index_speed_axis.count,
         2,
     );
-    let kept2 = controller::tables::INDEX_CELLS.len();
+    let kept2 = controller::TABLES.cell_count;
     let file_bytes = |name: &str| {
         std::fs::metadata(
             std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -296,22 +295,23 @@ fn the_sparse_index_scales_with_the_plans() {
         .len()
     };
     let (bin2, bin3) = (
-        file_bytes("tables.bin"),
+        file_bytes("controller.tables.bin"),
         file_bytes("three_capsules.tables.bin"),
     );
     println!(
-        "index cells kept: M = 2 {kept2} of {dense2}, M = 3 {kept3} of {dense3}; table files M = 2 {bin2} B, M = 3 {bin3} B; emitted data M = 2 {} B, M = 3 {} B",
-        controller::tables::TABLE_BYTES,
-        three_capsules::tables::TABLE_BYTES
+        "index cells kept: M = 2 {kept2} of {dense2}, M = 3 {kept3} of {dense3}; table files M = 2 {bin2} B, M = 3 {bin3} B; section data M = 2 {} B, M = 3 {} B",
+        controller::TABLES.data_bytes(),
+        three_capsules::TABLES.data_bytes()
     );
     assert!(kept3 * 2 < dense3, "{kept3} of {dense3}");
     assert!(bin3 <= 64 << 20, "{bin3}");
     assert!(bin2 <= 16 << 20, "{bin2}");
     // Sorted and distinct: the runtime bisects them.
-    for cells in [
-        &three_capsules::tables::INDEX_CELLS[..],
-        &controller::tables::INDEX_CELLS[..],
-    ] {
+    use capsule_mpc_runtime::solver::format::Section;
+    for t in [three_capsules::TABLES, controller::TABLES] {
+        let cells: Vec<u64> = (0..t.cell_count)
+            .map(|c| t.u64_at(Section::IndexCells, c))
+            .collect();
         assert!(cells.windows(2).all(|w| w[0] < w[1]));
     }
 }

@@ -62,6 +62,7 @@ extern "C" {
 #define CAPSULE_MPC_ERR_WRONG_FEED (-11)     /* feed_state outside ideal sampling, feed_tracking in it */
 #define CAPSULE_MPC_ERR_LOOP_RUNNING (-12)   /* set_sampling after the loop started: reset first */
 #define CAPSULE_MPC_ERR_TARGET_NOT_AT_REST (-13) /* a target speed is not 0 */
+#define CAPSULE_MPC_ERR_CORRUPT_TABLES (-14) /* the compiled-in table file failed its SHA-256 check */
 
 /* Sampling modes (capsule_mpc_set_sampling). */
 #define CAPSULE_MPC_SAMPLING_IDEAL 0

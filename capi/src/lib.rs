@@ -19,7 +19,7 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 
 use capsule_mpc_runtime::controller::{Refine, Sampling};
-use capsule_mpc_runtime::generated::controller::solver::Solver;
+use capsule_mpc_runtime::generated::controller::Solver;
 use capsule_mpc_runtime::generated::{PlanSolver, Tier};
 use capsule_mpc_runtime::{DefaultController, RuntimeError, RuntimeStatus};
 use core::mem::{align_of, size_of};
@@ -42,6 +42,8 @@ pub const CAPSULE_MPC_ERR_BAD_TIME: i32 = -10;
 pub const CAPSULE_MPC_ERR_WRONG_FEED: i32 = -11;
 pub const CAPSULE_MPC_ERR_LOOP_RUNNING: i32 = -12;
 pub const CAPSULE_MPC_ERR_TARGET_NOT_AT_REST: i32 = -13;
+/// The compiled-in table file failed its integrity check (SHA-256).
+pub const CAPSULE_MPC_ERR_CORRUPT_TABLES: i32 = -14;
 
 pub const CAPSULE_MPC_SAMPLING_IDEAL: i32 = 0;
 pub const CAPSULE_MPC_SAMPLING_CONSTANT: i32 = 1;
@@ -123,6 +125,7 @@ fn map_err(e: RuntimeError) -> i32 {
         RuntimeError::BadSetting(_) => CAPSULE_MPC_ERR_BAD_SETTING,
         RuntimeError::BadTime(_) => CAPSULE_MPC_ERR_BAD_TIME,
         RuntimeError::TargetNotAtRest => CAPSULE_MPC_ERR_TARGET_NOT_AT_REST,
+        RuntimeError::CorruptTables(_) => CAPSULE_MPC_ERR_CORRUPT_TABLES,
     }
 }
 

@@ -196,7 +196,7 @@ for n in "${counts[@]}"; do
         echo "FAIL: the merged crate of $n shards differs from the single-process one"
         exit 1
     fi
-    cmp "$run/single/tables.bin" "$run/merged-$n/tables.bin"
+    cmp "$run/single/controller.tables.bin" "$run/merged-$n/controller.tables.bin"
     # Per round: units computed and the slowest shard's time (from the logs).
     cat "$work"/logs/round-*-shard-*.out | awk '
         /^round [0-9]+, shard/ {
@@ -212,5 +212,5 @@ for n in "${counts[@]}"; do
             }
             printf "  rounds: slowest shards sum to %.1f s, all shards %.1f s\n", tm, ts
         }'
-    echo "ok: $n shard(s) merged byte-identical to the single-process run ($(stat -c %s "$run/merged-$n/tables.bin") bytes of tables)"
+    echo "ok: $n shard(s) merged byte-identical to the single-process run ($(stat -c %s "$run/merged-$n/controller.tables.bin") bytes of tables)"
 done

@@ -22,7 +22,7 @@ use capsule_mpc_capi as capi;
 use capsule_mpc_generator::config::{Config, ConfigError};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{Sampling, SwitchingRule, SETTING_NAMES};
-use capsule_mpc_runtime::generated::PlanSolver;
+use capsule_mpc_runtime::solver::PlanSolver;
 use capsule_mpc_runtime::{
     Controller, DefaultController, PaperController, RuntimeError, RuntimeStatus,
 };
@@ -528,13 +528,13 @@ pub fn runtime(data: &[u8]) {
     let Some(which) = inp.byte() else { return };
     if which % 4 == 0 {
         run_controller::<
-            capsule_mpc_runtime::generated::paper_preset::solver::Solver,
+            capsule_mpc_runtime::generated::paper_preset::Solver,
             { capsule_mpc_runtime::generated::paper_preset::spec::NX },
             { capsule_mpc_runtime::generated::paper_preset::spec::K },
         >(&mut inp, PaperController::default_settings());
     } else {
         run_controller::<
-            capsule_mpc_runtime::generated::controller::solver::Solver,
+            capsule_mpc_runtime::generated::controller::Solver,
             { capsule_mpc_runtime::generated::controller::spec::NX },
             { capsule_mpc_runtime::generated::controller::spec::K },
         >(&mut inp, DefaultController::default_settings());

@@ -6,7 +6,7 @@ pub const MEASURED: bool = true;
 /// Per warm-start index cell of `controller`: the most active-set
 /// iterations one QP took in the offline solves there (cold and
 /// warm, every schedule); 0 where nothing was solved.
-pub static CONTROLLER: &[u8] = &[
+pub const CONTROLLER: &[u8] = &[
     21, 21, 21, 21, 19, 19, 19, 20, 20, 20, 20, 22, 22, 20, 22, 22, 21, 21, 21, 20, 21,
     21, 21, 20, 19, 19, 19, 19, 20, 20, 20, 20, 20, 22, 22, 22, 20, 22, 22, 20, 21, 21,
     21, 21, 22, 21, 21, 22, 21, 21, 22, 21, 21, 21, 20, 21, 21, 21, 21, 21, 21, 21, 21,
@@ -662,7 +662,7 @@ pub static CONTROLLER: &[u8] = &[
 /// Largest entry of `CONTROLLER`.
 pub const CONTROLLER_MAX: u8 = 30;
 /// The paper preset has no index cells.
-pub static PAPER_PRESET: &[u8] = &[];
+pub const PAPER_PRESET: &[u8] = &[];
 /// The three-capsule preset's map is not measured (its cells are
 /// not the benchmarked controller's).
-pub static THREE_CAPSULES: &[u8] = &[];
+pub const THREE_CAPSULES: &[u8] = &[];

@@ -573,45 +573,8 @@ pub fn dense_hessian(s: &ExplicitSample, n: usize) -> Vec<Vec<f64>> {
     h
 }
 
-/// Floating-point operations (add, multiply, divide, square root, compare)
-/// of one explicit step in its worst case, counted from the loop bounds of
-/// the emitted `explicit` module with `qp_iterations` active-set
-/// iterations, each in its worst case (every variable free, the Cholesky
-/// factor rebuilt from its first row).
-pub fn explicit_step_ops(n: usize, nx: usize, k: usize, qp_iterations: usize) -> u64 {
-    let (n, nx, k) = (n as u64, nx as u64, k as u64);
-    // Index look-up: per axis a subtraction, a division, two compares, a
-    // rounding, a multiply-add; the fine-grid test likewise per capsule.
-    // The kept cells of the sparse index are found by bisection over
-    // integer cell numbers (at most 64 integer compares per cell, 2 NX + 1
-    // cells): no floating-point operations.
-    let lookup = 6 * nx + 6 * (nx / 2) + 2 * nx;
-    // The nearest of the candidates (the cell's sample, its 2 NX axis
-    // neighbours', the last sample's successor): per candidate and axis a
-    // subtraction, a division, a multiply-add, and one compare.
-    let candidates = (2 * nx + 2) * (4 * nx + 1);
-    // Deviation, gradient g0 + F d, bounds, Hessian copy, warm start.
-    let setup = nx + 2 * n * nx + 2 * n + n * n + 2 * n;
-    // One active-set iteration, worst case.
-    let collect = n;
-    // Cholesky rows r = 0..n, columns c = 0..=r: 2c multiply-adds + 1.
-    let mut factor = 0;
-    for r in 0..n {
-        for c in 0..=r {
-            factor += 2 * c + 2;
-        }
-    }
-    let newton_rhs = n * (2 * n + 1);
-    let substitutions = 2 * (n * n + n);
-    let ratio = 5 * n;
-    let update = 3 * n;
-    let multipliers = n * (2 * n + 3);
-    let per_iteration =
-        collect + factor + newton_rhs + substitutions + ratio + update + multipliers + n;
-    // Plan assembly (window clamp, tail copy) and the predicted cost.
-    let finish = 3 * n + k + (nx * nx * 2 + nx * 2 + 2 * n * nx + n * n * 2 + 2 * n + 4);
-    lookup + candidates + setup + qp_iterations as u64 * per_iteration + finish
-}
+/// The certified operation count of one explicit step (the online code's own count).
+pub use capsule_mpc_solver::explicit::explicit_step_ops;
 
 #[cfg(test)]
 mod tests {

@@ -2,13 +2,13 @@
 //! `--check` comparison against what is committed.
 
 use crate::config::{Config, CostUnits, Preset};
-use crate::emit::{emit_lib, emit_module, emit_qp_iteration_map, EmitError, EmitInput};
+use crate::emit::{
+    emit_lib, emit_manifest, emit_module, emit_qp_iteration_map, EmitError, EmitInput,
+};
 use crate::explicit::{build_explicit, ExplicitTables};
-use crate::tables::{build_tables, config_hash, Progress, Tables};
+use crate::table_file;
+use crate::tables::{build_tables, config_hash, Progress, TableError, Tables};
 use std::path::{Path, PathBuf};
-
-/// The generated crate's manifest (static).
-const GENERATED_MANIFEST: &str = include_str!("../templates/Cargo.toml.in");
 
 /// Table I weights of the paper (states in cm, cm/s; u in T/m).
 pub const PAPER_Q_PER_CAPSULE: [f64; 2] = [0.02, 0.001];
@@ -43,6 +43,8 @@ pub enum GenerateError {
     Emit(#[from] EmitError),
     #[error("{path}: {reason}")]
     Io { path: String, reason: String },
+    #[error(transparent)]
+    Tables(#[from] TableError),
 }
 
 fn io_err(path: &Path, e: std::io::Error) -> GenerateError {
@@ -137,12 +139,9 @@ impl ControllerModule {
         format!("src/{}.rs", self.module_name())
     }
 
-    /// The module's tables file, relative to the crate.
-    pub fn tables_path(self) -> &'static str {
-        match self {
-            ControllerModule::Controller => "tables.bin",
-            ControllerModule::ThreeCapsules => "three_capsules.tables.bin",
-        }
+    /// The module's table file, relative to the crate.
+    pub fn tables_path(self) -> String {
+        table_file_name(self.module_name())
     }
 
     /// Its entry in `qp_iteration_map.rs`.
@@ -152,6 +151,41 @@ impl ControllerModule {
             ControllerModule::ThreeCapsules => "THREE_CAPSULES",
         }
     }
+}
+
+/// The table file of module `name`, relative to the crate.
+pub fn table_file_name(name: &str) -> String {
+    format!("{name}.tables.bin")
+}
+
+/// The human-readable summary committed beside a table file.
+pub fn summary_file_name(name: &str) -> String {
+    format!("{name}.tables.txt")
+}
+
+/// A module's source, table file and summary.
+fn module_files(
+    name: &str,
+    config: &Config,
+    tables: Option<&Tables>,
+    explicit: Option<&ExplicitTables>,
+    qp_map_ident: &str,
+) -> Result<Vec<(PathBuf, Vec<u8>)>, GenerateError> {
+    let table_name = table_file_name(name);
+    let source = emit_module(&EmitInput {
+        config,
+        use_tables: tables.is_some(),
+        config_hash: config_hash(config),
+        qp_map_ident,
+        table_file: &table_name,
+    })?;
+    let bytes = table_file::encode(config, tables, explicit);
+    let summary = table_file::summary(&bytes, config, &table_name)?;
+    Ok(vec![
+        (PathBuf::from(format!("src/{name}.rs")), source.into_bytes()),
+        (PathBuf::from(summary_file_name(name)), summary.into_bytes()),
+        (PathBuf::from(table_name), bytes),
+    ])
 }
 
 /// Builds the tables and emits every file of the generated crate.
@@ -181,20 +215,16 @@ pub fn emit_module_files(
     if module == ControllerModule::Controller {
         return emit_all(config, tables);
     }
-    let source = emit_module(&EmitInput {
+    // No explicit tier outside the default controller: the explicit
+    // generator addresses samples with u16 slots (at most 65 535) and the
+    // M = 3 data would be large; `refine = none` is refused there.
+    let files = module_files(
+        module.module_name(),
         config,
-        tables: Some(&tables),
-        config_hash: config_hash(config),
-        qp_map_ident: module.qp_map_ident(),
-        // No explicit tier outside the default controller: the explicit
-        // generator addresses samples with u16 slots (at most 65 535) and
-        // the M = 3 data would be large; `refine = none` is refused there.
-        explicit: None,
-    })?;
-    let files = vec![
-        (PathBuf::from(module.source_path()), source.into_bytes()),
-        (PathBuf::from(module.tables_path()), tables.to_bytes()),
-    ];
+        Some(&tables),
+        None,
+        module.qp_map_ident(),
+    )?;
     Ok(GeneratedFiles {
         files,
         tables,
@@ -204,41 +234,32 @@ pub fn emit_module_files(
 
 /// Emits every file from already-built tables of the default `controller`.
 pub fn emit_all(config: &Config, tables: Tables) -> Result<GeneratedFiles, GenerateError> {
-    // Derived from the tables at emission (not stored in tables.bin): the
-    // linearization is cheap next to the tables and needs no format change.
+    // Derived from the tables at emission: the linearization is cheap next
+    // to the tables.
     let explicit = build_explicit(config, &tables);
-    let controller = emit_module(&EmitInput {
-        config,
-        tables: Some(&tables),
-        config_hash: config_hash(config),
-        qp_map_ident: ControllerModule::Controller.qp_map_ident(),
-        explicit: Some(&explicit),
-    })?;
-    let paper = paper_preset(config);
-    let paper_module = emit_module(&EmitInput {
-        config: &paper,
-        tables: None,
-        config_hash: config_hash(&paper),
-        qp_map_ident: "PAPER_PRESET",
-        explicit: None,
-    })?;
-    let files = vec![
-        (
-            PathBuf::from("Cargo.toml"),
-            GENERATED_MANIFEST.as_bytes().to_vec(),
-        ),
+    let mut files = vec![
+        (PathBuf::from("Cargo.toml"), emit_manifest().into_bytes()),
         (PathBuf::from("src/lib.rs"), emit_lib().into_bytes()),
-        (PathBuf::from("src/controller.rs"), controller.into_bytes()),
-        (
-            PathBuf::from("src/paper_preset.rs"),
-            paper_module.into_bytes(),
-        ),
-        (
-            PathBuf::from(QP_ITERATION_MAP_PATH),
-            emit_qp_iteration_map(None)?.into_bytes(),
-        ),
-        (PathBuf::from("tables.bin"), tables.to_bytes()),
     ];
+    files.extend(module_files(
+        "controller",
+        config,
+        Some(&tables),
+        Some(&explicit),
+        ControllerModule::Controller.qp_map_ident(),
+    )?);
+    let paper = paper_preset(config);
+    files.extend(module_files(
+        "paper_preset",
+        &paper,
+        None,
+        None,
+        "PAPER_PRESET",
+    )?);
+    files.push((
+        PathBuf::from(QP_ITERATION_MAP_PATH),
+        emit_qp_iteration_map(None)?.into_bytes(),
+    ));
     Ok(GeneratedFiles {
         files,
         tables,

@@ -16,4 +16,5 @@ pub mod mintime;
 pub mod model;
 pub mod ocp;
 pub mod shard;
+pub mod table_file;
 pub mod tables;

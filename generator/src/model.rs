@@ -14,6 +14,7 @@
 //! diagonal with one 2x2 block per capsule; this module works per capsule.
 
 use crate::config::{Config, DragLaw};
+use capsule_mpc_solver::DragLaw as SolverDrag;
 use serde::Serialize;
 use std::f64::consts::PI;
 
@@ -32,20 +33,23 @@ pub enum Drag {
 }
 
 impl Drag {
-    /// Drag acceleration (m/s^2) at speed `v_m_per_s` and its derivative d a / d v (1/s).
-    pub fn accel_and_slope(&self, v_m_per_s: f64) -> (f64, f64) {
-        let s = v_m_per_s.abs();
-        let sign = if v_m_per_s < 0.0 { -1.0 } else { 1.0 };
+    /// The law as the online solver evaluates it (one implementation).
+    pub fn law(&self) -> SolverDrag {
         match *self {
-            Drag::Quadratic { b_per_m } => (-b_per_m * v_m_per_s * s, -2.0 * b_per_m * s),
+            Drag::Quadratic { b_per_m } => SolverDrag::Quadratic { b_per_m },
             Drag::SphereCorrelation {
                 k_per_m,
                 re_per_speed_s_per_m,
-            } => {
-                let (h, dh) = sphere_cd_v2(s, re_per_speed_s_per_m);
-                (-k_per_m * sign * h, -k_per_m * dh)
-            }
+            } => SolverDrag::SphereCorrelation {
+                k_per_m,
+                re_per_speed_s_per_m,
+            },
         }
+    }
+
+    /// Drag acceleration (m/s^2) at speed `v_m_per_s` and its derivative d a / d v (1/s).
+    pub fn accel_and_slope(&self, v_m_per_s: f64) -> (f64, f64) {
+        self.law().accel_and_slope(v_m_per_s)
     }
 
     /// The quadratic coefficient b (1/m) that matches this law at speed `v`:
@@ -53,30 +57,12 @@ impl Drag {
     pub fn effective_b_per_m(&self, v_m_per_s: f64) -> f64 {
         match *self {
             Drag::Quadratic { b_per_m } => b_per_m,
-            Drag::SphereCorrelation {
-                k_per_m,
-                re_per_speed_s_per_m,
-            } => {
+            Drag::SphereCorrelation { .. } => {
                 let s = v_m_per_s.abs().max(1e-9);
-                k_per_m * sphere_cd_v2(s, re_per_speed_s_per_m).0 / (s * s)
+                -self.accel_and_slope(s).0 / (s * s)
             }
         }
     }
-}
-
-/// h(s) = C_d(Re) s^2 for the Clift-Gauvin correlation
-/// `C_d = 24/Re (1 + 0.15 Re^0.687) + 0.42 / (1 + 42500 Re^-1.16)`, and dh/ds.
-/// Written so that it is finite at s = 0 (the Stokes part is linear in s).
-pub fn sphere_cd_v2(s: f64, c: f64) -> (f64, f64) {
-    let t1 = 24.0 / c * (s + 0.15 * c.powf(0.687) * s.powf(1.687));
-    let dt1 = 24.0 / c * (1.0 + 0.15 * 1.687 * c.powf(0.687) * s.powf(0.687));
-    if s <= 0.0 {
-        return (0.0, dt1);
-    }
-    let w = 42500.0 * (c * s).powf(-1.16);
-    let t2 = 0.42 * s * s / (1.0 + w);
-    let dt2 = 0.42 * (2.0 * s * (1.0 + w) + 1.16 * s * w) / ((1.0 + w) * (1.0 + w));
-    (t1 + t2, dt1 + dt2)
 }
 
 /// Derived constants of one capsule.

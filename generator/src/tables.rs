@@ -23,14 +23,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-/// Bumped whenever the table layout or its meaning changes (2: SHA-256
-/// trailer over the payload; 3: minimum-time plans and chained legs; 4: a
-/// sparse warm-start index).
-pub const TABLE_FORMAT_VERSION: u32 = 4;
-/// First bytes of every table file.
-pub const TABLE_MAGIC: [u8; 8] = *b"CAPSMPC\0";
-/// Length of the SHA-256 trailer that ends every table file, bytes.
-pub const TABLE_CHECKSUM_BYTES: usize = 32;
+/// The table file's layout version and magic bytes (see
+/// `capsule_mpc_solver::format`).
+pub use capsule_mpc_solver::format::{
+    FORMAT_VERSION as TABLE_FORMAT_VERSION, MAGIC as TABLE_MAGIC,
+};
 /// Speed half-range of the warm-start index, m/s (plans peak near 0.35 m/s).
 pub const INDEX_SPEED_RANGE_M_PER_S: f64 = 0.4;
 /// Speed step of the warm-start index, m/s.
@@ -166,70 +163,19 @@ pub fn hex(bytes: &[u8]) -> String {
 }
 
 impl Tables {
-    /// File layout: bincode(Tables) (standard config, header first), then a
-    /// [`TABLE_CHECKSUM_BYTES`]-byte SHA-256 of everything before it. The
-    /// checksum catches what decoding cannot: a flipped bit inside a stored
-    /// float still decodes, to a wrong plan.
-    pub fn to_bytes(&self) -> Vec<u8> {
-        let mut bytes = bincode::serde::encode_to_vec(self, bincode::config::standard())
-            .expect("tables encode");
-        let checksum: [u8; TABLE_CHECKSUM_BYTES] = Sha256::digest(&bytes).into();
-        bytes.extend_from_slice(&checksum);
-        bytes
+    /// The table file of these tables (see [`crate::table_file`]).
+    pub fn to_bytes(
+        &self,
+        config: &Config,
+        explicit: Option<&crate::explicit::ExplicitTables>,
+    ) -> Vec<u8> {
+        crate::table_file::encode(config, Some(self), explicit)
     }
 
-    /// Checks magic and format version (from the header alone, so a file of
-    /// another version is named as such, not as corrupt), then the
-    /// checksum, then decodes and checks the config hash.
+    /// Reads a table file back (format, dimensions, config hash and
+    /// checksum checked).
     pub fn from_bytes(bytes: &[u8], config: &Config) -> Result<Tables, TableError> {
-        let standard = bincode::config::standard();
-        let corrupt = |e: bincode::error::DecodeError| TableError::Corrupt(e.to_string());
-        let (magic, _): ([u8; 8], usize) =
-            bincode::serde::decode_from_slice(bytes, standard).map_err(corrupt)?;
-        if magic != TABLE_MAGIC {
-            return Err(TableError::Magic { found: magic });
-        }
-        // The version alone (after the magic): a file of another version
-        // may lay out the rest differently and carry no checksum.
-        let ((_, format_version), _): (([u8; 8], u32), usize) =
-            bincode::serde::decode_from_slice(bytes, standard).map_err(corrupt)?;
-        if format_version != TABLE_FORMAT_VERSION {
-            return Err(TableError::Version {
-                found: format_version,
-                expected: TABLE_FORMAT_VERSION,
-            });
-        }
-        let Some(payload_len) = bytes.len().checked_sub(TABLE_CHECKSUM_BYTES) else {
-            return Err(TableError::Corrupt(format!(
-                "{} bytes, shorter than the {TABLE_CHECKSUM_BYTES}-byte checksum",
-                bytes.len()
-            )));
-        };
-        let (payload, stored) = bytes.split_at(payload_len);
-        let computed: [u8; TABLE_CHECKSUM_BYTES] = Sha256::digest(payload).into();
-        if stored != computed {
-            return Err(TableError::Checksum {
-                stored: hex(stored),
-                computed: hex(&computed),
-            });
-        }
-        let (tables, used): (Tables, usize) =
-            bincode::serde::decode_from_slice(payload, standard).map_err(corrupt)?;
-        if used != payload.len() {
-            return Err(TableError::Corrupt(format!(
-                "{} trailing bytes after the tables",
-                payload.len() - used
-            )));
-        }
-        let h = &tables.header;
-        let expected = config_hash(config);
-        if h.config_hash != expected {
-            return Err(TableError::ConfigMismatch {
-                found: hex(&h.config_hash),
-                expected: hex(&expected),
-            });
-        }
-        Ok(tables)
+        crate::table_file::decode(bytes, config)
     }
 
     pub fn read(path: &std::path::Path, config: &Config) -> Result<Tables, TableError> {
@@ -571,9 +517,39 @@ mod tests {
     /// A distinctive stored value, found in the encoding by its bytes.
     const MARKER_T_PER_M: f64 = 0.012_345_678_9;
 
-    /// Small tables with the embedded config's header (the file checks do
-    /// not depend on the contents).
+    /// The embedded config cut to two-sample plans and a one-sample window,
+    /// so that hand-made tables fit its dimensions.
+    fn small_config() -> Config {
+        let mut config = Config::embedded_default();
+        config.controller.plan_steps = 2;
+        config.controller.horizon_steps = 1;
+        config
+    }
+
+    /// Small tables for `small_config` (M = 2, K = 2): one plan, three
+    /// index cells (the file checks do not depend on the contents).
     fn small_tables(config: &Config) -> Tables {
+        let plan = PlanEntry {
+            e0: vec![0.01, 0.0, 0.01, 0.0],
+            plan: Plan {
+                u: vec![MARKER_T_PER_M, -0.02],
+                states: vec![
+                    vec![0.01, 0.0, 0.01, 0.0],
+                    vec![0.005, -0.1, 0.006, -0.09],
+                    vec![0.0, 0.0, 0.0, 0.0],
+                ],
+                cost: 1.5,
+                iterations: 3,
+            },
+            reached: true,
+            arrival_samples: 2,
+            min_time_s: 0.04,
+        };
+        let one = Axis {
+            start: 0.01,
+            step: 0.01,
+            count: 1,
+        };
         Tables {
             header: TableHeader {
                 magic: TABLE_MAGIC,
@@ -582,19 +558,8 @@ mod tests {
                 generator_version: "test".to_string(),
             },
             plan_steps: 2,
-            plan_axis: Axis::symmetric(0.01, 0.01),
-            plans: vec![PlanEntry {
-                e0: vec![0.01, 0.0],
-                plan: Plan {
-                    u: vec![MARKER_T_PER_M, -0.02],
-                    states: vec![vec![0.01, 0.0], vec![0.005, -0.1], vec![0.0, 0.0]],
-                    cost: 1.5,
-                    iterations: 3,
-                },
-                reached: true,
-                arrival_samples: 2,
-                min_time_s: 0.04,
-            }],
+            plan_axis: one.clone(),
+            plans: vec![plan.clone()],
             index_position_axis: Axis::symmetric(0.01, 0.01),
             index_speed_axis: Axis::symmetric(0.1, 0.1),
             index_cells: vec![0, 4, 8],
@@ -606,68 +571,67 @@ mod tests {
                 x_diameter: 0.1,
             },
             legs: LegTable {
-                axis: Axis::symmetric(0.01, 0.01),
-                first_leg: vec![0, crate::legs::NO_LEG, 0],
-                chain_time_s: vec![0.5, 0.0, 0.5],
+                axis: one.clone(),
+                first_leg: vec![0],
+                chain_time_s: vec![f64::INFINITY],
             },
             coasted: CoastedTables {
                 coast_s: 0.02,
-                plans: Vec::new(),
-                index: vec![(u16::MAX, 0)],
+                plans: vec![PlanEntry {
+                    min_time_s: f64::INFINITY,
+                    reached: false,
+                    ..plan
+                }],
+                index: vec![(0, 1), (u16::MAX, 0), (0, 0)],
             },
             fine: FineTables {
-                axis: Axis::symmetric(0.001, 0.001),
-                plans: Vec::new(),
-                coasted_plans: Vec::new(),
+                axis: one,
+                plans: vec![vec![0.0, 0.01]],
+                coasted_plans: vec![vec![0.01, 0.0]],
             },
         }
     }
 
     #[test]
     fn tables_round_trip_with_a_checksum_trailer() {
-        let config = Config::embedded_default();
+        let config = small_config();
         let tables = small_tables(&config);
-        let bytes = tables.to_bytes();
-        let payload = &bytes[..bytes.len() - TABLE_CHECKSUM_BYTES];
+        let bytes = tables.to_bytes(&config, None);
+        let payload = &bytes[..bytes.len() - 32];
         let digest: [u8; 32] = Sha256::digest(payload).into();
         assert_eq!(&bytes[payload.len()..], &digest[..]);
         assert_eq!(Tables::from_bytes(&bytes, &config).unwrap(), tables);
     }
 
     /// The case the checksum exists for: one flipped bit inside a stored
-    /// float still decodes (to a different plan), and is refused.
+    /// float still parses (to a different plan), and is refused.
     #[test]
     fn a_flipped_bit_inside_a_float_is_refused_by_the_checksum() {
-        let config = Config::embedded_default();
-        let mut bytes = small_tables(&config).to_bytes();
+        let config = small_config();
+        let mut bytes = small_tables(&config).to_bytes(&config, None);
         let marker = MARKER_T_PER_M.to_le_bytes();
         let at = bytes
             .windows(8)
             .position(|w| w == marker)
             .expect("the marker float is stored as 8 little-endian bytes");
         bytes[at] ^= 1;
-        let payload = &bytes[..bytes.len() - TABLE_CHECKSUM_BYTES];
-        let (decoded, _): (Tables, usize) =
-            bincode::serde::decode_from_slice(payload, bincode::config::standard())
-                .expect("the corrupted payload still decodes");
-        assert_ne!(decoded.plans[0].plan.u[0], MARKER_T_PER_M);
         let err = Tables::from_bytes(&bytes, &config).unwrap_err();
         assert!(matches!(err, TableError::Checksum { .. }), "{err}");
         assert!(err.to_string().contains("SHA-256"), "{err}");
     }
 
-    /// Every single-bit flip anywhere in the file is refused: in the magic
-    /// or version by those checks, elsewhere by the checksum.
+    /// Every single-bit flip anywhere in the file is refused: in the
+    /// header and directory by their checks, elsewhere by the checksum.
     #[test]
     fn every_single_bit_flip_is_refused() {
-        let config = Config::embedded_default();
-        let bytes = small_tables(&config).to_bytes();
+        let config = small_config();
+        let bytes = small_tables(&config).to_bytes(&config, None);
+        let data_start = 64 + 24 * capsule_mpc_solver::format::Section::COUNT;
         for bit in 0..8 * bytes.len() {
             let mut flipped = bytes.clone();
             flipped[bit / 8] ^= 1 << (bit % 8);
             let err = Tables::from_bytes(&flipped, &config).unwrap_err();
-            if bit >= 8 * 9 {
-                // Past the magic and the one-byte version.
+            if bit >= 8 * data_start {
                 assert!(
                     matches!(err, TableError::Checksum { .. }),
                     "bit {bit}: {err}"
@@ -678,25 +642,25 @@ mod tests {
 
     #[test]
     fn every_truncation_is_refused() {
-        let config = Config::embedded_default();
-        let bytes = small_tables(&config).to_bytes();
+        let config = small_config();
+        let bytes = small_tables(&config).to_bytes(&config, None);
         for len in 0..bytes.len() {
             let err = Tables::from_bytes(&bytes[..len], &config).unwrap_err();
+            let text = err.to_string();
             assert!(
-                err.to_string().contains("truncated or corrupted"),
+                text.contains("truncated") || text.contains("corrupted"),
                 "{len}: {err}"
             );
         }
     }
 
-    /// A version-1 file (plain bincode, no checksum) is named as such, not
-    /// as corrupt.
+    /// A file of another format version (the bincode files of earlier
+    /// versions among them) is named as such, not as corrupt.
     #[test]
-    fn a_version_1_file_is_refused_with_the_version_error() {
-        let config = Config::embedded_default();
-        let mut old = small_tables(&config);
-        old.header.format_version = 1;
-        let bytes = bincode::serde::encode_to_vec(&old, bincode::config::standard()).unwrap();
+    fn another_format_version_is_refused_with_the_version_error() {
+        let config = small_config();
+        let mut bytes = small_tables(&config).to_bytes(&config, None);
+        bytes[8..12].copy_from_slice(&1u32.to_le_bytes());
         let err = Tables::from_bytes(&bytes, &config).unwrap_err();
         assert!(
             matches!(
@@ -714,22 +678,34 @@ mod tests {
     /// A wrong magic is reported as such, whatever follows it.
     #[test]
     fn a_wrong_magic_is_refused_with_the_magic_error() {
-        let config = Config::embedded_default();
-        let mut bytes = small_tables(&config).to_bytes();
+        let config = small_config();
+        let mut bytes = small_tables(&config).to_bytes(&config, None);
         bytes[..8].copy_from_slice(b"\x89PNG\r\n\x1a\n");
         let err = Tables::from_bytes(&bytes, &config).unwrap_err();
         assert!(matches!(err, TableError::Magic { .. }), "{err}");
-        let err = Tables::from_bytes(b"CAPSMPC", &config).unwrap_err();
+        let err = Tables::from_bytes(b"CMPCTBL", &config).unwrap_err();
         assert!(matches!(err, TableError::Corrupt(_)), "{err}");
     }
 
     #[test]
-    fn another_config_is_refused_after_the_checksum_passes() {
-        let config = Config::embedded_default();
+    fn another_config_is_refused() {
+        let config = small_config();
         let mut other = config.clone();
         other.capsule[0].sphere_radius_m *= 2.0;
-        let bytes = small_tables(&config).to_bytes();
+        let bytes = small_tables(&config).to_bytes(&config, None);
         let err = Tables::from_bytes(&bytes, &other).unwrap_err();
         assert!(matches!(err, TableError::ConfigMismatch { .. }), "{err}");
+    }
+
+    /// The summary names every section and the hashes.
+    #[test]
+    fn the_summary_lists_every_section() {
+        let config = small_config();
+        let bytes = small_tables(&config).to_bytes(&config, None);
+        let text = crate::table_file::summary(&bytes, &config, "test.tables.bin").unwrap();
+        for s in capsule_mpc_solver::format::Section::ALL {
+            assert!(text.contains(s.name()), "{}", s.name());
+        }
+        assert!(text.contains(&hex(&config_hash(&config))));
     }
 }

@@ -6,7 +6,7 @@ use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
     PaperConstants, TightInputs,
 };
-use capsule_mpc_generated::{PlanSolver, SolveReport, SolveStatus, Tier};
+use capsule_mpc_solver::{PlanSolver, SolveReport, SolveStatus, Tier};
 
 mod braking;
 mod checks;
@@ -117,6 +117,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     pub fn new(settings: ControllerSettings, positions_m: &[f64]) -> Result<Self, RuntimeError> {
         const { assert!(NX <= K2 && NX.is_multiple_of(2)) };
         check_settings(&settings, S::N, S::HAS_EXPLICIT_TIER)?;
+        S::verify_tables().map_err(RuntimeError::CorruptTables)?;
         let mut c = Controller {
             solver: S::new(),
             settings,
@@ -247,7 +248,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// workspace, speeds exactly 0 (the plans bring the capsules to rest; a
     /// moving target is refused with `TargetNotAtRest`). Reached from
     /// wherever the capsules are, through waypoints when one stored plan
-    /// does not reach (see [`Leg`](capsule_mpc_generated::Leg)); the plan restarts.
+    /// does not reach (see [`Leg`](capsule_mpc_solver::Leg)); the plan restarts.
     pub fn set_target(&mut self, target: &[f64; NX]) -> Result<(), RuntimeError> {
         if target.iter().any(|v| !v.is_finite()) {
             return Err(RuntimeError::NonFinite("target"));

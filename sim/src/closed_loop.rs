@@ -222,23 +222,23 @@ pub fn run(config: &Config, opts: &RunOptions) -> Result<RunReport> {
     let module = compiled_controller_for(config)?;
     match (opts.preset, module) {
         (Preset::Default, ControllerModule::Controller) => {
-            run_with::<controller::solver::Solver, { controller::spec::NX }, { controller::spec::K }>(
+            run_with::<controller::Solver, { controller::spec::NX }, { controller::spec::K }>(
                 config, opts,
             )
         }
         (Preset::Default, ControllerModule::ThreeCapsules) => run_with::<
-            three_capsules::solver::Solver,
+            three_capsules::Solver,
             { three_capsules::spec::NX },
             { three_capsules::spec::K },
         >(config, opts),
         (Preset::Paper, ControllerModule::ThreeCapsules) => {
             bail!("the paper preset is compiled for the default two-capsule config only")
         }
-        (Preset::Paper, ControllerModule::Controller) => run_with::<
-            paper_preset::solver::Solver,
-            { paper_preset::spec::NX },
-            { paper_preset::spec::K },
-        >(config, opts),
+        (Preset::Paper, ControllerModule::Controller) => {
+            run_with::<paper_preset::Solver, { paper_preset::spec::NX }, { paper_preset::spec::K }>(
+                config, opts,
+            )
+        }
     }
 }
 

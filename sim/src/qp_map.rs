@@ -13,19 +13,24 @@
 use anyhow::Result;
 use capsule_mpc_generator::generate::GeneratedFiles;
 use capsule_mpc_runtime::controller::Sampling;
-use capsule_mpc_runtime::generated::controller::{lookup, solver, spec, tables};
-use capsule_mpc_runtime::generated::SolveStatus;
+use capsule_mpc_runtime::generated::controller::{spec, Solver, TABLES};
+use capsule_mpc_runtime::solver::format::Section;
+use capsule_mpc_runtime::solver::lookup;
+use capsule_mpc_runtime::solver::{PlanSolver, SolveStatus};
 use capsule_mpc_runtime::DefaultController;
 use rayon::prelude::*;
 
-/// The controller module this binary was compiled with.
+/// The controller module this binary was compiled with: its binding and
+/// its table file (the algorithm is the solver crate compiled in).
 const COMPILED_CONTROLLER: &str = include_str!("../../generated/src/controller.rs");
 
-/// Measures the map into `files` when their emitted solver is the one
-/// compiled into this binary (the map describes that solver); returns
-/// false, leaving the unmeasured placeholder, otherwise.
+/// Measures the map into `files` when their controller is the one compiled
+/// into this binary (same binding, same table file: the map describes that
+/// solver); returns false, leaving the unmeasured placeholder, otherwise.
 pub fn fill_if_compiled(files: &mut GeneratedFiles) -> Result<bool> {
-    if files.file("src/controller.rs") != Some(COMPILED_CONTROLLER.as_bytes()) {
+    if files.file("src/controller.rs") != Some(COMPILED_CONTROLLER.as_bytes())
+        || files.file(spec::TABLE_FILE_NAME) != Some(spec::TABLE_FILE)
+    {
         return Ok(false);
     }
     files.set_qp_iteration_map(&measure())?;
@@ -44,44 +49,33 @@ pub fn schedules() -> [(usize, f64); 3] {
 }
 
 /// Centre of the kept index cell in `slot` (its row-major number over e1,
-/// v1, e2, v2, ... is `tables::INDEX_CELLS[slot]`).
+/// v1, e2, v2, ... is the table file's `index_cells[slot]`).
 pub fn cell_centre(slot: usize) -> [f64; spec::NX] {
-    let mut flat = tables::INDEX_CELLS[slot] as usize;
-    let mut e = [0.0; spec::NX];
-    for j in (0..spec::NX).rev() {
-        let axis = if j % 2 == 0 {
-            tables::INDEX_POSITION_AXIS
-        } else {
-            tables::INDEX_SPEED_AXIS
-        };
-        e[j] = axis.start + (flat % axis.count) as f64 * axis.step;
-        flat /= axis.count;
-    }
-    e
+    lookup::cell_centre(&TABLES, slot).unwrap_or([f64::NAN; spec::NX])
 }
 
 /// Measures the map over every cell (both cores): per cell, the most
 /// iterations any QP took in a cold solve from its centre or in the warm
 /// solve one sample later (counted in the cell that state falls into).
 pub fn measure() -> Vec<u8> {
-    let cells = tables::INDEX.len();
+    let cells = TABLES.elements(Section::Index);
     let hits: Vec<Vec<(usize, u32)>> = (0..cells)
         .into_par_iter()
         .map(|c| {
             let e = cell_centre(c);
             let mut out = Vec::with_capacity(2 * schedules().len());
             for (samples, coast_s) in schedules() {
-                let mut s = solver::Solver::new();
+                let mut s = Solver::new();
                 s.set_schedule(samples, coast_s);
                 let cold = s.solve(&e);
                 if cold.status == SolveStatus::OutOfRange {
                     continue;
                 }
                 out.push((c, cold.max_qp_iterations));
-                let e1 = solver::predict(&e, s.plan(), 1);
+                let e1 = Solver::predict_plan(&e, s.plan(), 1);
                 s.shift(1);
                 let warm = s.solve(&e1);
-                if let Some(c1) = lookup::index_cell(&e1) {
+                if let Some(c1) = lookup::index_cell(&TABLES, &e1) {
                     out.push((c1, warm.max_qp_iterations));
                 }
             }
@@ -102,8 +96,8 @@ pub fn measure() -> Vec<u8> {
 /// centre.
 fn dilate(map: &[u8]) -> Vec<u8> {
     let step = [
-        tables::INDEX_POSITION_AXIS.step,
-        tables::INDEX_SPEED_AXIS.step,
+        TABLES.index_position_axis.step,
+        TABLES.index_speed_axis.step,
     ];
     (0..map.len())
         .map(|slot| {
@@ -117,7 +111,7 @@ fn dilate(map: &[u8]) -> Vec<u8> {
                     *x += (rest % 3) as f64 * step[j % 2] - step[j % 2];
                     rest /= 3;
                 }
-                if let Some(n) = lookup::index_cell(&e) {
+                if let Some(n) = lookup::index_cell(&TABLES, &e) {
                     most = most.max(map[n]);
                 }
             }

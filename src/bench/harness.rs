@@ -8,8 +8,9 @@ use crate::bench::tiers::measure_tiers;
 use crate::bench::timing::{fmt_us, pin_to_one_core, timed, timer_overhead_ns, Percentiles};
 use anyhow::Result;
 use capsule_mpc_runtime::controller::Sampling as RtSampling;
-use capsule_mpc_runtime::generated::controller::{lookup, solver, spec, tables};
+use capsule_mpc_runtime::generated::controller::{spec, Solver};
 use capsule_mpc_runtime::generated::{qp_iteration_map, SolveReport, SolveStatus};
+use capsule_mpc_runtime::solver::PlanSolver;
 use capsule_mpc_runtime::DefaultController;
 use serde_json::{json, Value};
 use spec::{M, NX};
@@ -55,12 +56,12 @@ pub fn prototype_controller_with(sampling: RtSampling) -> Result<DefaultControll
 /// Times the cold and warm controller step and solver solve from `e`.
 pub fn time_state(proto: &DefaultController, e: &[f64; NX]) -> StateTiming {
     // Solver only.
-    let mut s = solver::Solver::new();
+    let mut s = Solver::new();
     let settings = proto.settings();
     let (samples, coast_s) = settings.schedule(settings.max_actuation_samples);
     s.set_schedule(samples, coast_s);
     let (cold, solver_cold) = timed(|| black_box(&mut s).solve(black_box(e)));
-    let e1 = solver::predict(e, s.plan(), 1);
+    let e1 = Solver::predict_plan(e, s.plan(), 1);
     s.shift(1);
     let (warm, solver_warm) = timed(|| black_box(&mut s).solve(black_box(&e1)));
     // Controller step.
@@ -74,8 +75,8 @@ pub fn time_state(proto: &DefaultController, e: &[f64; NX]) -> StateTiming {
         solver_warm,
         cold,
         warm,
-        cold_map: lookup::qp_iterations_measured(e),
-        warm_map: lookup::qp_iterations_measured(&e1),
+        cold_map: Solver::qp_iterations_measured(e),
+        warm_map: Solver::qp_iterations_measured(&e1),
     }
 }
 
@@ -272,8 +273,8 @@ pub fn measure(
         "allocations_per_step": 0,
         "allocations_source": "tests/alloc_free.rs (counting global allocator over set_target, cycle_full_state and cycle along closed-loop runs)",
         "workspace_bytes": std::mem::size_of::<DefaultController>(),
-        "solver_bytes": std::mem::size_of::<solver::Solver>(),
-        "table_bytes": tables::TABLE_BYTES,
+        "solver_bytes": std::mem::size_of::<Solver>(),
+        "table_bytes": spec::TABLE_FILE.len(),
         "timer_overhead_ns": overhead,
         "pinned_core": core,
         "origins": origins,

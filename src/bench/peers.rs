@@ -8,8 +8,9 @@ use crate::bench::osqp_peer::OsqpEngine;
 use crate::bench::reference::{ActiveSetEngine, QpEngine, RefProblem, RefSolver};
 use crate::bench::states::BenchState;
 use crate::bench::timing::{fmt_us, timed, Percentiles};
-use capsule_mpc_runtime::generated::controller::{solver, spec};
+use capsule_mpc_runtime::generated::controller::{spec, Solver};
 use capsule_mpc_runtime::generated::{SolveReport, SolveStatus};
+use capsule_mpc_runtime::solver::PlanSolver;
 use serde_json::{json, Value};
 use spec::{K, NX};
 
@@ -26,9 +27,9 @@ pub struct WarmCase {
 
 impl WarmCase {
     pub fn new(e: &[f64; NX]) -> WarmCase {
-        let mut s = solver::Solver::new();
+        let mut s = Solver::new();
         let cold = s.solve(e);
-        let e1 = solver::predict(e, s.plan(), 1);
+        let e1 = Solver::predict_plan(e, s.plan(), 1);
         s.shift(1);
         let start = (cold.status != SolveStatus::OutOfRange).then(|| *s.plan());
         let report = s.solve(&e1);

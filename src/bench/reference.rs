@@ -7,7 +7,9 @@ use anyhow::{bail, Result};
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::model::{rk4_capsule, CapsuleParams, Model};
 use capsule_mpc_generator::ocp::OcpWeights;
-use capsule_mpc_runtime::generated::controller::{lookup, qp, spec};
+use capsule_mpc_runtime::generated::controller::{spec, TABLES};
+use capsule_mpc_runtime::solver::lookup;
+use capsule_mpc_runtime::solver::qp::BoxQp;
 use spec::{K, M, N, NX};
 
 /// Model and weights of the reference loop, from the config (not from the
@@ -186,9 +188,17 @@ pub trait QpEngine {
 }
 
 /// The generated solver's primal active-set method.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct ActiveSetEngine {
-    pub qp: qp::BoxQp,
+    pub qp: BoxQp<N>,
+}
+
+impl Default for ActiveSetEngine {
+    fn default() -> Self {
+        ActiveSetEngine {
+            qp: BoxQp::<{ spec::N }>::new(spec::QP_MAX_ITERATIONS, spec::QP_MULTIPLIER_TOLERANCE),
+        }
+    }
 }
 
 impl QpEngine for ActiveSetEngine {
@@ -277,7 +287,7 @@ impl RefSolver {
     ) -> Option<([f64; K], f64)> {
         let mut best = plan.map(|p| (*p, problem.cost(e, p)));
         let mut cand = [0.0; K];
-        if lookup::lookup_tail(e, &mut cand).is_some() {
+        if lookup::lookup_tail(&TABLES, e, &mut cand).is_some() {
             let c = problem.cost(e, &cand);
             if best.as_ref().is_none_or(|b| c < b.1) {
                 best = Some((cand, c));
@@ -425,7 +435,7 @@ impl RefSolver {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use capsule_mpc_runtime::generated::controller::solver;
+    use capsule_mpc_runtime::generated::controller::Solver;
 
     #[test]
     fn adjoint_gradient_matches_finite_differences() {
@@ -458,7 +468,7 @@ mod tests {
         let mut rs = RefSolver::new();
         let mut engine = ActiveSetEngine::default();
         for e in [[0.02, 0.0, -0.01, 0.0], [-0.03, 0.1, 0.02, -0.2]] {
-            let mut s = solver::Solver::new();
+            let mut s = Solver::new();
             let r = s.solve(&e);
             let ours = rs.refine(&problem, &mut engine, &e, None).unwrap();
             assert!(

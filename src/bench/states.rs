@@ -3,7 +3,8 @@
 
 use anyhow::{Context, Result};
 use capsule_mpc_generator::config::Config;
-use capsule_mpc_runtime::generated::controller::{lookup, spec, tables};
+use capsule_mpc_runtime::generated::controller::{spec, TABLES};
+use capsule_mpc_runtime::solver::lookup;
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling, Scenario};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -72,7 +73,7 @@ pub fn sample_states(config: &Config, n: usize, seed: u64) -> Result<Vec<BenchSt
         closed
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let axis = tables::INDEX_POSITION_AXIS;
+    let axis = TABLES.index_position_axis;
     let (p_lo, p_hi) = (axis.start, axis.start + (axis.count - 1) as f64 * axis.step);
     while states.len() < n {
         let mut e = [0.0; NX];
@@ -86,7 +87,7 @@ pub fn sample_states(config: &Config, n: usize, seed: u64) -> Result<Vec<BenchSt
         // Only states in a kept cell of the sparse warm-start index: the
         // others have no stored plan and go to the runtime's fallback, not
         // to the solver being timed.
-        if lookup::index_cell(&e).is_none() {
+        if lookup::index_cell(&TABLES, &e).is_none() {
             continue;
         }
         states.push(BenchState {

@@ -20,9 +20,12 @@ use crate::bench::osqp_peer::OsqpEngine;
 use crate::bench::reference::{DenseQp, QpEngine};
 use crate::bench::states::BenchState;
 use crate::bench::timing::{fmt_us, timed, Percentiles};
-use capsule_mpc_generator::explicit::explicit_step_ops;
-use capsule_mpc_runtime::generated::controller::{explicit, explicit_tables, qp, solver, spec};
+use capsule_mpc_runtime::generated::controller::{spec, Solver, TABLES};
 use capsule_mpc_runtime::generated::SolveStatus;
+use capsule_mpc_runtime::solver::explicit::{self, explicit_step_ops, ExplicitSample};
+use capsule_mpc_runtime::solver::format::Section;
+use capsule_mpc_runtime::solver::qp::BoxQp;
+use capsule_mpc_runtime::solver::PlanSolver;
 use serde_json::{json, Value};
 use spec::{K, N, NX};
 use std::hint::black_box;
@@ -32,17 +35,17 @@ pub const REPEATS: usize = 3;
 
 /// A timed step's start: the solver after its first explicit step, and
 /// the state one sample later.
-type Start = (solver::Solver, [f64; NX]);
+type Start = (Solver, [f64; NX]);
 
 /// The state after one explicit sample from `e`, and the solver that
 /// played it (its last slot set as in the closed loop); None out of range.
 fn after_one_explicit_sample(e: &[f64; NX]) -> Option<Start> {
-    let mut s = solver::Solver::new();
+    let mut s = Solver::new();
     if s.solve_explicit(e).status == SolveStatus::OutOfRange {
         return None;
     }
     s.adopt_explicit();
-    let e1 = solver::predict(e, s.plan(), 1);
+    let e1 = Solver::predict_plan(e, s.plan(), 1);
     s.shift(1);
     Some((s, e1))
 }
@@ -94,7 +97,7 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
         *histogram.entry(it).or_default() += 1;
     }
     let measured_max_ops = explicit_step_ops(N, NX, K, max_iterations as usize);
-    let certified = explicit_tables::EXPLICIT_CERTIFIED_OPS;
+    let certified = <Solver as PlanSolver<NX, K>>::EXPLICIT_CERTIFIED_OPS;
     println!(
         "tiers ({} states in range, min of {REPEATS}): {:<10} {:>9} {:>9} {:>9}",
         starts.len(),
@@ -139,7 +142,7 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
         },
         "states": starts.len(),
         "repeats": REPEATS,
-        "explicit_table_bytes": explicit_tables::EXPLICIT_TABLE_BYTES,
+        "explicit_table_bytes": explicit_table_bytes(),
         "peers_on_explicit_qp": peers,
     })
 }
@@ -152,13 +155,24 @@ fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
     let count = peer_count.min(starts.len());
     let stride = (starts.len() / count.max(1)).max(1);
     let mut cases: Vec<(DenseQp, usize)> = Vec::new();
-    let mut qp = qp::BoxQp::new();
+    let mut qp = BoxQp::<{ spec::N }>::new(spec::QP_MAX_ITERATIONS, spec::QP_MULTIPLIER_TOLERANCE);
     let mut plan = [0.0; K];
     for (_, e1) in starts.iter().step_by(stride).take(count) {
-        let Some(slot) = explicit::explicit_slot(e1, false, usize::MAX) else {
+        let Some(slot) = explicit::explicit_slot(&TABLES, e1, false, usize::MAX) else {
             continue;
         };
-        if explicit::explicit_plan(e1, false, usize::MAX, None, &mut qp, &mut plan).is_none() {
+        if explicit::explicit_plan(
+            &TABLES,
+            spec::U_MAX_T_PER_M,
+            e1,
+            false,
+            usize::MAX,
+            None,
+            &mut qp,
+            &mut plan,
+        )
+        .is_none()
+        {
             continue;
         }
         cases.push((
@@ -177,12 +191,13 @@ fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
         let mut best = u64::MAX;
         let mut x = [0.0; N];
         for _ in 0..REPEATS {
-            let mut q = qp::BoxQp::new();
+            let mut q =
+                BoxQp::<{ spec::N }>::new(spec::QP_MAX_ITERATIONS, spec::QP_MULTIPLIER_TOLERANCE);
             q.h = case.h;
             q.g = case.g;
             q.lo = case.lo;
             q.hi = case.hi;
-            let active = explicit_tables::EXPLICIT[*slot].active;
+            let active = ExplicitSample::get(&TABLES, *slot).map_or([0; N], |s| s.active::<N>());
             let (_, t) = timed(|| black_box(&mut q).solve_from(black_box(&active)));
             best = best.min(t);
             x = q.x;
@@ -226,4 +241,19 @@ fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
         );
     }
     Value::Object(out)
+}
+
+/// Bytes of the explicit tier's sections of the table file.
+fn explicit_table_bytes() -> usize {
+    [
+        Section::ExplicitSamples,
+        Section::ExplicitState,
+        Section::ExplicitIndexSlot,
+        Section::CoastedExplicitIndexSlot,
+        Section::FineExplicitSlot,
+        Section::CoastedFineExplicitSlot,
+    ]
+    .iter()
+    .map(|&s| TABLES.section_bytes(s).len())
+    .sum()
 }

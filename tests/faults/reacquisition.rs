@@ -122,7 +122,7 @@ fn a_wrong_reset_is_reacquired_and_the_loop_settles() {
 
         // Settled at A: inside 1 mm by 2 s, and (the capsules' relative
         // drift aside, which the loop corrects with a swing out of the band
-        // every few seconds: README, Known limits) inside 90 % of the
+        // every few seconds: docs/known-limits.md) inside 90 % of the
         // cycles from then to 6 s.
         let (mut cycles, mut inside) = (0, 0);
         let mut first_inside_s = None;

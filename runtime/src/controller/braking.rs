@@ -5,7 +5,7 @@
 
 use super::settings::*;
 use super::status::K2;
-use capsule_mpc_generated::*;
+use capsule_mpc_solver::*;
 
 /// Fallback outside the tables: one braking sample, bounded by u_max,
 /// never an extrapolated table value. One gradient changes every capsule's

@@ -2,7 +2,7 @@
 //! workspace, frames of the right length.
 
 use super::status::RuntimeError;
-use capsule_mpc_generated::PlanSolver;
+use capsule_mpc_solver::PlanSolver;
 
 /// Positions of `x` (every `stride`-th entry: 1 for positions only, 2 for
 /// a full state) must lie in the solver's workspace.

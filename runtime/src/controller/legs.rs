@@ -4,7 +4,7 @@
 
 use super::settings::*;
 use super::Controller;
-use capsule_mpc_generated::*;
+use capsule_mpc_solver::*;
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
     /// The next leg from the capsules' positions in `x` to `target`. A

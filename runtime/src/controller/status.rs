@@ -1,7 +1,7 @@
 //! What a cycle reports: its status, its output, and the errors of calls
 //! with bad arguments.
 
-use capsule_mpc_generated::SolveReport;
+use capsule_mpc_solver::{SolveReport, TableError};
 
 /// Status of one cycle (the plan is always usable and within |u| <= u_max).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -71,6 +71,10 @@ pub enum RuntimeError {
     BadTime(&'static str),
     /// A target speed is not zero: the plans bring the capsules to rest.
     TargetNotAtRest,
+    /// The solver's table file failed its integrity check (SHA-256
+    /// trailer): no number of it is used. Rebuild from a clean checkout or
+    /// regenerate.
+    CorruptTables(TableError),
 }
 
 /// What one cycle returns.

@@ -9,7 +9,7 @@ use super::settings::*;
 use super::status::*;
 use super::Controller;
 use crate::estimator::*;
-use capsule_mpc_generated::*;
+use capsule_mpc_solver::*;
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
     /// One scanner cycle on the host's clock. `measured_positions_m` (None:

@@ -1,13 +1,11 @@
 //! The window QP's engine: a dense box-constrained QP solved by a primal
 //! active-set method, and the clamp of a gradient to the amplitude limit.
-//! Shared by the refinement (`solver`) and the explicit tier (`explicit`).
-
-use super::spec::*;
+//! Shared by the refinement (`refine`) and the explicit tier (`explicit`).
 
 /// Dense box-constrained QP `min 1/2 x'Hx + g'x, lo <= x <= hi` (lo <= 0 <= hi),
 /// solved by a primal active-set method from x = 0.
 #[derive(Debug, Clone)]
-pub struct BoxQp {
+pub struct BoxQp<const N: usize> {
     pub h: [[f64; N]; N],
     pub g: [f64; N],
     pub lo: [f64; N],
@@ -25,16 +23,17 @@ pub struct BoxQp {
     rhs: [f64; N],
     newton: [f64; N],
     free: [usize; N],
+    /// Active-set iterations allowed (hard cap).
+    max_iterations: usize,
+    /// Multipliers below this count as zero.
+    multiplier_tolerance: f64,
 }
 
-impl Default for BoxQp {
-    fn default() -> Self {
-        BoxQp::new()
-    }
-}
-
-impl BoxQp {
-    pub const fn new() -> BoxQp {
+impl<const N: usize> BoxQp<N> {
+    /// An empty QP solved with at most `max_iterations` active-set
+    /// iterations; multipliers within `multiplier_tolerance` of zero count
+    /// as zero.
+    pub const fn new(max_iterations: usize, multiplier_tolerance: f64) -> BoxQp<N> {
         BoxQp {
             h: [[0.0; N]; N],
             g: [0.0; N],
@@ -48,7 +47,14 @@ impl BoxQp {
             rhs: [0.0; N],
             newton: [0.0; N],
             free: [0; N],
+            max_iterations,
+            multiplier_tolerance,
         }
+    }
+
+    /// The iteration cap.
+    pub const fn max_iterations(&self) -> usize {
+        self.max_iterations
     }
 
     /// Returns (iterations, converged). On the iteration bound, `x` is the
@@ -64,7 +70,13 @@ impl BoxQp {
         let mut j = 0;
         while j < N {
             let a = active[j];
-            self.active[j] = if a > 0 { 1 } else if a < 0 { -1 } else { 0 };
+            self.active[j] = if a > 0 {
+                1
+            } else if a < 0 {
+                -1
+            } else {
+                0
+            };
             self.x[j] = if a > 0 {
                 self.hi[j]
             } else if a < 0 {
@@ -76,7 +88,7 @@ impl BoxQp {
         }
         self.factored = 0;
         let mut iter = 0u32;
-        while (iter as usize) < QP_MAX_ITERATIONS {
+        while (iter as usize) < self.max_iterations {
             iter += 1;
             // Newton step on the free set with the active variables fixed.
             let nf = self.collect_free();
@@ -115,7 +127,11 @@ impl BoxQp {
             }
             if blocking != usize::MAX {
                 let up = self.newton[blocking] > self.x[blocking];
-                self.x[blocking] = if up { self.hi[blocking] } else { self.lo[blocking] };
+                self.x[blocking] = if up {
+                    self.hi[blocking]
+                } else {
+                    self.lo[blocking]
+                };
                 self.active[blocking] = if up { 1 } else { -1 };
                 self.keep_rows_before(blocking);
                 continue;
@@ -134,7 +150,7 @@ impl BoxQp {
                     }
                     // At an upper bound the gradient must be <= 0, at a lower >= 0.
                     let wrong = if self.active[j] > 0 { grad } else { -grad };
-                    if wrong > worst + QP_MULTIPLIER_TOLERANCE {
+                    if wrong > worst + self.multiplier_tolerance {
                         worst = wrong;
                         release = j;
                     }
@@ -259,11 +275,32 @@ impl BoxQp {
     }
 }
 
-pub fn clamp_u(u: f64) -> f64 {
-    if u > U_MAX_T_PER_M {
-        U_MAX_T_PER_M
-    } else if u < -U_MAX_T_PER_M {
-        -U_MAX_T_PER_M
+/// A solver of the refinement's window QP: reads `h`, `g`, `lo`, `hi` of
+/// `qp` and leaves its answer in `qp.x` (within the box even when it
+/// fails; zero is). Returns (iterations, converged). The refinement's
+/// engine is this crate's active-set method; benchmarks plug in others.
+pub trait QpEngine<const N: usize> {
+    fn solve(&mut self, qp: &mut BoxQp<N>) -> (u32, bool);
+}
+
+/// The primal active-set method of [`BoxQp`], from x = 0.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ActiveSet;
+
+impl<const N: usize> QpEngine<N> for ActiveSet {
+    #[inline]
+    fn solve(&mut self, qp: &mut BoxQp<N>) -> (u32, bool) {
+        qp.solve()
+    }
+}
+
+/// `u` clamped to the amplitude limit [-u_max, u_max].
+#[inline(always)]
+pub fn clamp_u(u: f64, u_max: f64) -> f64 {
+    if u > u_max {
+        u_max
+    } else if u < -u_max {
+        -u_max
     } else {
         u
     }

@@ -1,0 +1,179 @@
+//! What the runtime needs from a solver, and its implementation by the
+//! generic [`Solver`] for any module's [`Spec`].
+
+use crate::explicit::explicit_step_ops;
+use crate::lookup::{chain_time_s, covers_from_rest, first_leg, qp_iterations_measured};
+use crate::qp::QpEngine;
+use crate::refine::Solver;
+use crate::report::{Leg, SolveReport};
+use crate::rollout::{capsule_transition, predict, predict_constant, stage_cost};
+use crate::spec::Spec;
+use crate::tables::TableError;
+
+/// What the runtime drives. `NX` states, plans of `K` samples. Relative
+/// states are `e = x - x_target` in SI units.
+pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
+    /// Number of capsules (NX = 2 M).
+    const M: usize;
+    /// Online window N.
+    const N: usize;
+    /// Sample time, s.
+    const DT_S: f64;
+    /// Gradient bound, T/m.
+    const U_MAX_T_PER_M: f64;
+    /// State bounds (alpha): relative position (m) and speed (m/s).
+    const POSITION_BOUND_M: f64;
+    const SPEED_BOUND_M_PER_S: f64;
+    /// Scanner timing from the config, s.
+    const TRACKING_TIME_S: f64;
+    const EXTRA_DELAY_S: f64;
+    /// Position noise the estimator assumes, m.
+    const POSITION_NOISE_M: f64;
+    /// Switching rule constants (section III) and sigma.
+    const L_F: f64;
+    const L_L: f64;
+    const L_V: f64;
+    const X_DIAMETER: f64;
+    const SWITCHING_SIGMA: f64;
+    /// QP iteration bound (hard cap per QP).
+    const QP_MAX_ITERATIONS: usize;
+    /// Bytes of the table file.
+    const TABLE_BYTES: usize;
+    /// Workspace: every position of a target or start lies in
+    /// [WORKSPACE_MIN_M, WORKSPACE_MAX_M], m.
+    const WORKSPACE_MIN_M: f64;
+    const WORKSPACE_MAX_M: f64;
+    /// Whether the explicit tier has data (false without tables).
+    const HAS_EXPLICIT_TIER: bool;
+    /// Certified worst-case floating-point operations of one explicit step.
+    const EXPLICIT_CERTIFIED_OPS: u64;
+
+    fn new() -> Self;
+    /// Checks the tables' integrity (SHA-256 trailer), once per process:
+    /// call before trusting any plan.
+    fn verify_tables() -> Result<(), TableError>;
+    fn reset(&mut self);
+    /// Drops `samples` applied inputs from the front of the plan.
+    fn shift(&mut self, samples: usize);
+    /// The plan is played in actuation phases of `samples_per_phase`
+    /// samples, each followed by `coast_s` of zero gradient (tracking +
+    /// delay); `coast_s = 0` for back-to-back samples.
+    fn set_schedule(&mut self, samples_per_phase: usize, coast_s: f64);
+    /// Refines the plan from relative state `e` (SQP on the nonlinear
+    /// model). A plan from `solve_explicit` since the last call competes
+    /// on its true cost, so the result never costs more than it.
+    fn solve(&mut self, e: &[f64; NX]) -> SolveReport;
+    /// The explicit tier from `e`: no rollout, no Jacobians; its plan
+    /// becomes a candidate (see `solve`, `adopt_explicit`). `OutOfRange`
+    /// outside the index.
+    fn solve_explicit(&mut self, e: &[f64; NX]) -> SolveReport;
+    /// Makes the last explicit plan the current plan.
+    fn adopt_explicit(&mut self);
+    /// Current plan, T/m per sample.
+    fn plan(&self) -> &[f64; K];
+    /// Whether a start at rest at relative positions `e` is covered.
+    fn covers_from_rest(e: &[f64; NX]) -> bool;
+    /// The first leg from rest at displacement `d = x_start - x_target`
+    /// (positions; speeds ignored) through chained stored plans; None when
+    /// no chain gets there.
+    fn first_leg(d: &[f64; NX]) -> Option<Leg<NX>>;
+    /// Minimum rest-to-rest time of that chain (summed over its legs), s;
+    /// infinite without one.
+    fn chain_time_s(d: &[f64; NX]) -> f64;
+    /// Most active-set iterations one QP took in the offline solves in the
+    /// warm-start index cell of `e` (`capsule-mpc generate`); 0 when not
+    /// measured or outside the index.
+    fn qp_iterations_measured(e: &[f64; NX]) -> u32;
+    /// Stage cost L(e, u) (per sample).
+    fn stage_cost(e: &[f64; NX], u: f64) -> f64;
+    /// State after applying `plan[..samples]` from `e`.
+    fn predict_plan(e: &[f64; NX], plan: &[f64; K], samples: usize) -> [f64; NX];
+    /// State after `duration_s` of constant `u` from `e`.
+    fn predict_constant(e: &[f64; NX], u: f64, duration_s: f64) -> [f64; NX];
+    /// One capsule over `duration_s` at constant `u`: new (x, v) and the
+    /// 2x2 Jacobian d(x, v)/d(x0, v0) (row major), for the estimator.
+    fn capsule_transition(i: usize, xv: [f64; 2], u: f64, duration_s: f64) -> ([f64; 2], [f64; 4]);
+}
+
+impl<
+        S: Spec<M, NX>,
+        const M: usize,
+        const NX: usize,
+        const N: usize,
+        const K: usize,
+        E: QpEngine<N> + Default,
+    > PlanSolver<NX, K> for Solver<S, M, NX, N, K, E>
+{
+    const M: usize = M;
+    const N: usize = N;
+    const DT_S: f64 = S::DT_S;
+    const U_MAX_T_PER_M: f64 = S::U_MAX_T_PER_M;
+    const POSITION_BOUND_M: f64 = S::POSITION_BOUND_M;
+    const SPEED_BOUND_M_PER_S: f64 = S::SPEED_BOUND_M_PER_S;
+    const TRACKING_TIME_S: f64 = S::TRACKING_TIME_S;
+    const EXTRA_DELAY_S: f64 = S::EXTRA_DELAY_S;
+    const POSITION_NOISE_M: f64 = S::POSITION_NOISE_M;
+    const L_F: f64 = S::L_F;
+    const L_L: f64 = S::L_L;
+    const L_V: f64 = S::L_V;
+    const X_DIAMETER: f64 = S::X_DIAMETER;
+    const SWITCHING_SIGMA: f64 = S::SWITCHING_SIGMA;
+    const QP_MAX_ITERATIONS: usize = S::QP_MAX_ITERATIONS;
+    const TABLE_BYTES: usize = S::TABLES.bytes().len();
+    const WORKSPACE_MIN_M: f64 = S::WORKSPACE_MIN_M;
+    const WORKSPACE_MAX_M: f64 = S::WORKSPACE_MAX_M;
+    const HAS_EXPLICIT_TIER: bool = S::TABLES.explicit_count > 0;
+    const EXPLICIT_CERTIFIED_OPS: u64 = explicit_step_ops(N, NX, K, S::QP_MAX_ITERATIONS);
+
+    fn new() -> Self {
+        Solver::with_engine(E::default())
+    }
+    fn verify_tables() -> Result<(), TableError> {
+        S::verify_tables()
+    }
+    fn reset(&mut self) {
+        Solver::reset(self)
+    }
+    fn shift(&mut self, samples: usize) {
+        Solver::shift(self, samples)
+    }
+    fn set_schedule(&mut self, samples_per_phase: usize, coast_s: f64) {
+        Solver::set_schedule(self, samples_per_phase, coast_s)
+    }
+    fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
+        Solver::solve(self, e)
+    }
+    fn solve_explicit(&mut self, e: &[f64; NX]) -> SolveReport {
+        Solver::solve_explicit(self, e)
+    }
+    fn adopt_explicit(&mut self) {
+        Solver::adopt_explicit(self)
+    }
+    fn plan(&self) -> &[f64; K] {
+        Solver::plan(self)
+    }
+    fn covers_from_rest(e: &[f64; NX]) -> bool {
+        covers_from_rest(&S::TABLES, S::USE_TABLES, e)
+    }
+    fn first_leg(d: &[f64; NX]) -> Option<Leg<NX>> {
+        first_leg(&S::TABLES, S::USE_TABLES, d)
+    }
+    fn chain_time_s(d: &[f64; NX]) -> f64 {
+        chain_time_s(&S::TABLES, S::USE_TABLES, d)
+    }
+    fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
+        qp_iterations_measured(&S::TABLES, S::QP_ITERATION_MAP, e)
+    }
+    fn stage_cost(e: &[f64; NX], u: f64) -> f64 {
+        stage_cost::<S, M, NX>(e, u)
+    }
+    fn predict_plan(e: &[f64; NX], plan: &[f64; K], samples: usize) -> [f64; NX] {
+        predict::<S, M, NX, K>(e, plan, samples)
+    }
+    fn predict_constant(e: &[f64; NX], u: f64, duration_s: f64) -> [f64; NX] {
+        predict_constant::<S, M, NX>(e, u, duration_s)
+    }
+    fn capsule_transition(i: usize, xv: [f64; 2], u: f64, duration_s: f64) -> ([f64; 2], [f64; 4]) {
+        capsule_transition::<S, M, NX>(i, xv, u, duration_s)
+    }
+}
