@@ -10,7 +10,7 @@ use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::explicit::{
     build_explicit, dense_hessian, reference_box_qp, ExplicitTables, PlanSource,
 };
-use capsule_mpc_generator::tables::Tables;
+use capsule_mpc_generator::table_file;
 use capsule_mpc_runtime::generated::controller::spec::{K, M, NX};
 use capsule_mpc_runtime::generated::controller::Spec;
 use capsule_mpc_runtime::generated::controller::{spec, Solver, TABLES};
@@ -32,7 +32,7 @@ fn generator_explicit() -> &'static ExplicitTables {
     DATA.get_or_init(|| {
         let config = Config::embedded_default();
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("generated/controller.tables.bin");
-        let tables = Tables::read(&path, &config).expect("committed tables read");
+        let tables = table_file::read(&path, &config).expect("committed tables read");
         build_explicit(&config, &tables)
     })
 }

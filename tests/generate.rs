@@ -6,7 +6,8 @@ use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::generate::{
     differences, emit_module_files, generate, write_atomically, ControllerModule,
 };
-use capsule_mpc_generator::tables::{Silent, TableError, Tables};
+use capsule_mpc_generator::table_file;
+use capsule_mpc_generator::tables::{Silent, TableError};
 use std::path::Path;
 use std::process::Command;
 
@@ -40,7 +41,7 @@ fn committed_generated_crate_re_emits_from_its_own_tables() {
     for module in ControllerModule::ALL {
         let config = module.default_config();
         let tables =
-            Tables::read(&Path::new("generated").join(module.tables_path()), &config).unwrap();
+            table_file::read(&Path::new("generated").join(module.tables_path()), &config).unwrap();
         let mut files = emit_module_files(module, &config, tables).unwrap();
         if module == ControllerModule::Controller {
             let measured = capsule_mpc_sim::qp_map::fill_if_compiled(&mut files).unwrap();
@@ -59,17 +60,17 @@ fn committed_generated_crate_re_emits_from_its_own_tables() {
 fn committed_tables_refuse_another_config() {
     let mut other = Config::embedded_default();
     other.capsule[0].sphere_radius_m = 0.001;
-    let err = Tables::read(Path::new("generated/controller.tables.bin"), &other).unwrap_err();
+    let err = table_file::read(Path::new("generated/controller.tables.bin"), &other).unwrap_err();
     assert!(err.to_string().contains("different config"), "{err}");
     let bytes = std::fs::read("generated/controller.tables.bin").unwrap();
     let err =
-        Tables::from_bytes(&bytes[..bytes.len() / 2], &Config::embedded_default()).unwrap_err();
+        table_file::decode(&bytes[..bytes.len() / 2], &Config::embedded_default()).unwrap_err();
     assert!(err.to_string().contains("truncated or corrupted"), "{err}");
     // One flipped bit in the middle of the payload (inside the stored
     // plans) still decodes; the SHA-256 trailer refuses it.
     let mut flipped = bytes.clone();
     flipped[bytes.len() / 2] ^= 0x10;
-    let err = Tables::from_bytes(&flipped, &Config::embedded_default()).unwrap_err();
+    let err = table_file::decode(&flipped, &Config::embedded_default()).unwrap_err();
     assert!(matches!(err, TableError::Checksum { .. }), "{err}");
     assert!(err.to_string().contains("truncated or corrupted"), "{err}");
 }

@@ -5,6 +5,7 @@
 
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::shard::{compute_shard, merge_parts, round_count, ShardSpec};
+use capsule_mpc_generator::table_file::encode;
 use capsule_mpc_generator::tables::{build_tables, Silent};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -44,11 +45,11 @@ fn sharded_bytes(config: &Config, n: impl Fn(usize) -> usize) -> Vec<u8> {
         let new = run_round(config, r, n(r), &parts, dir.path());
         parts.extend(new);
     }
-    merge_parts(config, &parts).unwrap().to_bytes(config, None)
+    encode(config, Some(&merge_parts(config, &parts).unwrap()), None)
 }
 
 fn assert_merge_matches(config: &Config) {
-    let single = build_tables(config, &Silent).to_bytes(config, None);
+    let single = encode(config, Some(&build_tables(config, &Silent)), None);
     for n in [1, 3, 4] {
         let merged = sharded_bytes(config, |_| n);
         assert!(merged == single, "{n} shards: merged tables differ");
@@ -60,7 +61,7 @@ fn merged_tables_match_the_single_process_run_for_two_capsules() {
     let config = config("shard-m2.toml");
     assert_merge_matches(&config);
     // Each round may use its own shard count.
-    let single = build_tables(&config, &Silent).to_bytes(&config, None);
+    let single = encode(&config, Some(&build_tables(&config, &Silent)), None);
     assert!(
         sharded_bytes(&config, |r| 1 + r % 4) == single,
         "mixed shard counts"

@@ -196,6 +196,15 @@ fn file_error(e: capsule_mpc_solver::TableError, bytes: &[u8]) -> TableError {
     }
 }
 
+/// Reads the table file at `path` (see [`decode`]).
+pub fn read(path: &std::path::Path, config: &Config) -> Result<Tables, TableError> {
+    let bytes = std::fs::read(path).map_err(|e| TableError::Io {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    })?;
+    decode(&bytes, config)
+}
+
 /// Reads a table file back into the generator's tables for `config`
 /// (format, dimensions, config hash and checksum are checked first). A
 /// module without tables has none to read.
@@ -436,4 +445,209 @@ pub fn summary(bytes: &[u8], config: &Config, name: &str) -> Result<String, Tabl
         );
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tables::{TABLE_FORMAT_VERSION, TABLE_MAGIC};
+    use sha2::{Digest, Sha256};
+
+    /// A distinctive stored value, found in the encoding by its bytes.
+    const MARKER_T_PER_M: f64 = 0.012_345_678_9;
+
+    /// The embedded config cut to two-sample plans and a one-sample window,
+    /// so that hand-made tables fit its dimensions.
+    fn small_config() -> Config {
+        let mut config = Config::embedded_default();
+        config.controller.plan_steps = 2;
+        config.controller.horizon_steps = 1;
+        config
+    }
+
+    /// Small tables for `small_config` (M = 2, K = 2): one plan, three
+    /// index cells (the file checks do not depend on the contents).
+    fn small_tables(config: &Config) -> Tables {
+        let plan = PlanEntry {
+            e0: vec![0.01, 0.0, 0.01, 0.0],
+            plan: Plan {
+                u: vec![MARKER_T_PER_M, -0.02],
+                states: vec![
+                    vec![0.01, 0.0, 0.01, 0.0],
+                    vec![0.005, -0.1, 0.006, -0.09],
+                    vec![0.0, 0.0, 0.0, 0.0],
+                ],
+                cost: 1.5,
+                iterations: 3,
+            },
+            reached: true,
+            arrival_samples: 2,
+            min_time_s: 0.04,
+        };
+        let one = Axis {
+            start: 0.01,
+            step: 0.01,
+            count: 1,
+        };
+        Tables {
+            header: TableHeader {
+                magic: TABLE_MAGIC,
+                format_version: TABLE_FORMAT_VERSION,
+                config_hash: config_hash(config),
+                generator_version: "test".to_string(),
+            },
+            plan_steps: 2,
+            plan_axis: one.clone(),
+            plans: vec![plan.clone()],
+            index_position_axis: Axis::symmetric(0.01, 0.01),
+            index_speed_axis: Axis::symmetric(0.1, 0.1),
+            index_cells: vec![0, 4, 8],
+            index: vec![(0, 0), (0, 1), (u16::MAX, 0)],
+            switching: SwitchingConstants {
+                l_f: 1.0,
+                l_l: 2.0,
+                l_v: 3.0,
+                x_diameter: 0.1,
+            },
+            legs: LegTable {
+                axis: one.clone(),
+                first_leg: vec![0],
+                chain_time_s: vec![f64::INFINITY],
+            },
+            coasted: CoastedTables {
+                coast_s: 0.02,
+                plans: vec![PlanEntry {
+                    min_time_s: f64::INFINITY,
+                    reached: false,
+                    ..plan
+                }],
+                index: vec![(0, 1), (u16::MAX, 0), (0, 0)],
+            },
+            fine: FineTables {
+                axis: one,
+                plans: vec![vec![0.0, 0.01]],
+                coasted_plans: vec![vec![0.01, 0.0]],
+            },
+        }
+    }
+
+    #[test]
+    fn tables_round_trip_with_a_checksum_trailer() {
+        let config = small_config();
+        let tables = small_tables(&config);
+        let bytes = encode(&config, Some(&tables), None);
+        let payload = &bytes[..bytes.len() - 32];
+        let digest: [u8; 32] = Sha256::digest(payload).into();
+        assert_eq!(&bytes[payload.len()..], &digest[..]);
+        assert_eq!(decode(&bytes, &config).unwrap(), tables);
+    }
+
+    /// The case the checksum exists for: one flipped bit inside a stored
+    /// float still parses (to a different plan), and is refused.
+    #[test]
+    fn a_flipped_bit_inside_a_float_is_refused_by_the_checksum() {
+        let config = small_config();
+        let mut bytes = encode(&config, Some(&small_tables(&config)), None);
+        let marker = MARKER_T_PER_M.to_le_bytes();
+        let at = bytes
+            .windows(8)
+            .position(|w| w == marker)
+            .expect("the marker float is stored as 8 little-endian bytes");
+        bytes[at] ^= 1;
+        let err = decode(&bytes, &config).unwrap_err();
+        assert!(matches!(err, TableError::Checksum { .. }), "{err}");
+        assert!(err.to_string().contains("SHA-256"), "{err}");
+    }
+
+    /// Every single-bit flip anywhere in the file is refused: in the
+    /// header, the directory and the axes (whose counts the section lengths
+    /// must match) by those checks, elsewhere by the checksum.
+    #[test]
+    fn every_single_bit_flip_is_refused() {
+        let config = small_config();
+        let bytes = encode(&config, Some(&small_tables(&config)), None);
+        let data_start = format::HEADER_BYTES
+            + format::DIRECTORY_ENTRY_BYTES * Section::COUNT
+            + format::AXIS_BYTES * format::AXIS_COUNT;
+        for bit in 0..8 * bytes.len() {
+            let mut flipped = bytes.clone();
+            flipped[bit / 8] ^= 1 << (bit % 8);
+            let err = decode(&flipped, &config).unwrap_err();
+            if bit >= 8 * data_start {
+                assert!(
+                    matches!(err, TableError::Checksum { .. }),
+                    "bit {bit}: {err}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn every_truncation_is_refused() {
+        let config = small_config();
+        let bytes = encode(&config, Some(&small_tables(&config)), None);
+        for len in 0..bytes.len() {
+            let err = decode(&bytes[..len], &config).unwrap_err();
+            let text = err.to_string();
+            assert!(
+                text.contains("truncated") || text.contains("corrupted"),
+                "{len}: {err}"
+            );
+        }
+    }
+
+    /// A file of another format version (the bincode files of earlier
+    /// versions among them) is named as such, not as corrupt.
+    #[test]
+    fn another_format_version_is_refused_with_the_version_error() {
+        let config = small_config();
+        let mut bytes = encode(&config, Some(&small_tables(&config)), None);
+        bytes[8..12].copy_from_slice(&1u32.to_le_bytes());
+        let err = decode(&bytes, &config).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                TableError::Version {
+                    found: 1,
+                    expected: TABLE_FORMAT_VERSION
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("format version 1"), "{err}");
+    }
+
+    /// A wrong magic is reported as such, whatever follows it.
+    #[test]
+    fn a_wrong_magic_is_refused_with_the_magic_error() {
+        let config = small_config();
+        let mut bytes = encode(&config, Some(&small_tables(&config)), None);
+        bytes[..8].copy_from_slice(b"\x89PNG\r\n\x1a\n");
+        let err = decode(&bytes, &config).unwrap_err();
+        assert!(matches!(err, TableError::Magic { .. }), "{err}");
+        let err = decode(b"CMPCTBL", &config).unwrap_err();
+        assert!(matches!(err, TableError::Corrupt(_)), "{err}");
+    }
+
+    #[test]
+    fn another_config_is_refused() {
+        let config = small_config();
+        let mut other = config.clone();
+        other.capsule[0].sphere_radius_m *= 2.0;
+        let bytes = encode(&config, Some(&small_tables(&config)), None);
+        let err = decode(&bytes, &other).unwrap_err();
+        assert!(matches!(err, TableError::ConfigMismatch { .. }), "{err}");
+    }
+
+    /// The summary names every section and the hashes.
+    #[test]
+    fn the_summary_lists_every_section() {
+        let config = small_config();
+        let bytes = encode(&config, Some(&small_tables(&config)), None);
+        let text = summary(&bytes, &config, "test.tables.bin").unwrap();
+        for s in capsule_mpc_solver::format::Section::ALL {
+            assert!(text.contains(s.name()), "{}", s.name());
+        }
+        assert!(text.contains(&hex(&config_hash(&config))));
+    }
 }

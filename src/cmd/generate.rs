@@ -12,7 +12,8 @@ use capsule_mpc_generator::generate::{
 };
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_generator::shard::{compute_shard, merge_parts, ShardSpec, Sharding};
-use capsule_mpc_generator::tables::{Progress, Tables};
+use capsule_mpc_generator::table_file;
+use capsule_mpc_generator::tables::Progress;
 use capsule_mpc_sim::qp_map;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::sync::Mutex;
@@ -101,7 +102,7 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         emit_module_files(module, &config, merge_parts(&config, &args.parts)?)?
     } else if args.reuse_tables && !args.check {
         let path = out_dir.join(module.tables_path());
-        let tables = Tables::read(&path, &config).context("--reuse-tables")?;
+        let tables = table_file::read(&path, &config).context("--reuse-tables")?;
         emit_module_files(module, &config, tables)?
     } else {
         generate_module(module, &config, &bar)?
