@@ -193,7 +193,7 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "DIR")]
     pub plot: Option<PathBuf>,
     /// Write the run as played as a Pulseq 1.4 sequence (x gradient per
-    /// sample, placeholder tracking events) here; see README, "Export to Pulseq".
+    /// sample, placeholder tracking events) here; see docs/pulseq.md.
     #[arg(long, value_name = "FILE.seq")]
     pub pulseq: Option<PathBuf>,
     /// Which generated controller: the product's (`default`) or the paper's NMPC.

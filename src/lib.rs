@@ -20,3 +20,13 @@ pub mod cli;
 pub mod cmd;
 pub mod figures;
 pub mod pulseq_export;
+
+/// The Rust host in `docs/embedding.md`, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/embedding.md")]
+pub struct EmbeddingDocTests;
+
+/// The Rust snippet in `README.md`, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDocTests;

@@ -256,23 +256,33 @@ fn documented_sizes(text: &str, window: usize) -> (Vec<usize>, Vec<usize>) {
     (workspace, controller)
 }
 
-/// The workspace sizes the READMEs quote are the library's: the README's
-/// figures, the C embedding paragraph and the capi README all come from
+/// The workspace sizes the docs quote are the library's: the top-level
+/// README, every page of `docs/` (the embedding page's C section, the
+/// compute-time page) and the capi README all come from
 /// `capsule_mpc_workspace_size()` and the controller's size.
 #[test]
 fn documented_sizes_are_the_librarys() {
     let size = capsule_mpc_capi::capsule_mpc_workspace_size();
     let controller = core::mem::size_of::<capsule_mpc_runtime::DefaultController>();
-    let mut found = 0;
-    for rel in ["../README.md", "README.md"] {
+    let docs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs");
+    let mut pages: Vec<String> = std::fs::read_dir(&docs)
+        .unwrap_or_else(|e| panic!("reading {}: {e}", docs.display()))
+        .map(|entry| entry.unwrap().file_name().into_string().unwrap())
+        .filter(|name| name.ends_with(".md"))
+        .map(|name| format!("../docs/{name}"))
+        .collect();
+    pages.sort();
+    pages.extend(["../README.md".to_string(), "README.md".to_string()]);
+    let mut found = BTreeMap::new();
+    for rel in &pages {
         let (ws, ctl) = documented_sizes(&read(rel), 40);
-        for n in ws {
+        for n in &ws {
             assert_eq!(
-                n, size,
+                *n, size,
                 "{rel} quotes a {n}-byte workspace; capsule_mpc_workspace_size() = {size}"
             );
-            found += 1;
         }
+        found.insert(rel.as_str(), ws.len());
         for n in ctl {
             assert_eq!(
                 n, controller,
@@ -280,5 +290,14 @@ fn documented_sizes_are_the_librarys() {
             );
         }
     }
-    assert!(found >= 3, "expected the workspace size in both READMEs");
+    for rel in ["README.md", "../docs/embedding.md"] {
+        assert!(
+            found[rel] >= 1,
+            "expected the workspace size in {rel}: {found:?}"
+        );
+    }
+    assert!(
+        found.values().sum::<usize>() >= 3,
+        "expected the workspace size in the capi README and the docs: {found:?}"
+    );
 }

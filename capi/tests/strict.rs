@@ -263,7 +263,7 @@ fn host_loop(
 /// Earliest trace time T >= `after_s` from which every position stays
 /// within 1 mm of C and every speed below 5 mm/s for at least 1 s (the
 /// settle band; held for 1 s rather than to the end of the run, because
-/// station keeping is not indefinite: README, Known limits).
+/// station keeping is not indefinite: docs/known-limits.md).
 fn settled_from(trace: &[(f64, [f64; 4])], after_s: f64) -> Option<f64> {
     let inside = |s: &[f64; 4]| {
         (s[0] - TARGET_C[0]).abs() <= 1e-3

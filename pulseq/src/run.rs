@@ -91,7 +91,7 @@ impl ScannerLimits {
 
 /// The placeholder tracking event put in every tracking block: a hard RF pulse
 /// followed by one ADC readout, no gradients. **A placeholder**: a site
-/// replaces it with its own tracking sequence (see the README).
+/// replaces it with its own tracking sequence (see docs/pulseq.md).
 ///
 /// Within the block: `rf_delay_s` of nothing (covers the RF dead time), the
 /// RF pulse (`rf_duration_s`), `rf_to_adc_s` of nothing (covers RF ring-down

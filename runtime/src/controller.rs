@@ -93,7 +93,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             sampling: Sampling::Constant,
             // The explicit answer comes first either way; refining it per
             // played sample keeps the closed-loop results measured with
-            // the refinement (README) and costs at most N solves per cycle
+            // the refinement (docs/results.md) and costs at most N solves per cycle
             // inside the tracking phase. `None` is for hosts that need the
             // bounded explicit step alone.
             refine: Refine::PerSample,

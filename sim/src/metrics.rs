@@ -56,7 +56,7 @@ pub struct Metrics {
     /// Earliest record time from which the state stays in the settle band
     /// for at least [`SETTLE_HOLD_S`] (the arrival, robust to the slow
     /// relative drift that can take the capsules out seconds later; see
-    /// README, Known limits); `null` if never. `settle_over_bound` uses it.
+    /// docs/known-limits.md); `null` if never. `settle_over_bound` uses it.
     #[serde(default)]
     pub settle_held_s: Option<f64>,
 }

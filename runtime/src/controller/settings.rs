@@ -144,7 +144,7 @@ pub const HOLD_SPREAD_EXIT_M: f64 = 0.8e-3;
 /// is still centring the group ...
 pub const HOLD_SETTLING_S: f64 = 0.5;
 /// ... and only with at most this many capsules: with three, the end
-/// game's corrections take seconds (README, Three capsules), and leaving
+/// game's corrections take seconds (docs/three-capsules.md), and leaving
 /// the hold early only started them sooner (the 1.5 cm drift grid under
 /// variable sampling: 40 runs never settled against 38).
 pub const HOLD_EARLY_EXIT_MAX_CAPSULES: usize = 2;
