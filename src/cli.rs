@@ -173,6 +173,14 @@ pub struct SimulateArgs {
         value_name = "X1,X2,..."
     )]
     pub start: Option<Vec<f64>>,
+    /// The simulated capsules' drag as a factor of the model's: one for all
+    /// or one per capsule (S1,S2,...); the controller keeps the model.
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub plant_drag_scale: Option<Vec<f64>>,
+    /// The simulated capsules' magnetic gain as a factor of the model's
+    /// (one for all or one per capsule).
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub plant_gain_scale: Option<Vec<f64>>,
     #[arg(long, value_enum, default_value = "variable")]
     pub sampling: SamplingArg,
     #[arg(long, value_enum, default_value = "paper")]
@@ -287,6 +295,14 @@ pub struct ReachArgs {
         value_name = "X1,X2,..."
     )]
     pub start: Option<Vec<f64>>,
+    /// The simulated capsules' drag as a factor of the model's: one for all
+    /// or one per capsule (S1,S2,...); the controller keeps the model.
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub plant_drag_scale: Option<Vec<f64>>,
+    /// The simulated capsules' magnetic gain as a factor of the model's
+    /// (one for all or one per capsule).
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub plant_gain_scale: Option<Vec<f64>>,
     /// Simulated time per run, s (default: long enough for the grid).
     #[arg(long, value_parser = positive_seconds)]
     pub duration: Option<f64>,
@@ -480,5 +496,17 @@ impl From<SwitchingArg> for capsule_mpc_runtime::controller::SwitchingRule {
             SwitchingArg::Tight => capsule_mpc_runtime::controller::SwitchingRule::Tight,
             SwitchingArg::Paper => capsule_mpc_runtime::controller::SwitchingRule::Paper,
         }
+    }
+}
+
+/// The plant mismatch of `--plant-drag-scale` and `--plant-gain-scale`
+/// (checked against the capsule count by `PlantMismatch::factors`).
+pub fn mismatch(
+    drag: &Option<Vec<f64>>,
+    gain: &Option<Vec<f64>>,
+) -> capsule_mpc_sim::mismatch::PlantMismatch {
+    capsule_mpc_sim::mismatch::PlantMismatch {
+        drag_scale: drag.clone().unwrap_or_default(),
+        gain_scale: gain.clone().unwrap_or_default(),
     }
 }

@@ -25,6 +25,7 @@ fn reach(range_m: f64, step_m: f64, start_m: Vec<f64>) -> (Vec<ReachPoint>, Reac
         start_m,
         duration_s: None,
         extra_delay_s: None,
+        mismatch: Default::default(),
     };
     let points = reach_map(&config, &opts, &|| {}).unwrap();
     let summary = ReachSummary::of(&points);

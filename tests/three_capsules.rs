@@ -33,6 +33,7 @@ fn ideal_reach(step_m: f64) -> (Vec<ReachPoint>, ReachSummary) {
         start_m: Vec::new(),
         duration_s: Some(RUN_S),
         extra_delay_s: None,
+        mismatch: Default::default(),
     };
     let points = reach_map(&three(), &opts, &|| {}).unwrap();
     let summary = ReachSummary::of(&points);

@@ -3,8 +3,11 @@
 //! actuation phases chosen by the switching rule).
 
 use crate::metrics::Metrics;
+use crate::mismatch::PlantMismatch;
 use crate::plant::{Phase, Plant};
-use crate::report::{MeasurementRecord, RunReport, TierCycles};
+use crate::report::{
+    FrameCounts, MeasurementRecord, ModelParams, PlantReport, RunReport, TierCycles,
+};
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
 use capsule_mpc_generator::generate::ControllerModule;
@@ -118,6 +121,8 @@ pub struct RunOptions {
     /// When the SQP refinement runs after the explicit tier (the config's
     /// `controller.refine` by default).
     pub refine: RefineMode,
+    /// How the simulated capsules differ from the model (none by default).
+    pub mismatch: PlantMismatch,
 }
 
 impl RunOptions {
@@ -139,6 +144,7 @@ impl RunOptions {
             preset: Preset::Default,
             hold: true,
             refine: config.controller.refine,
+            mismatch: PlantMismatch::default(),
         }
     }
 }
@@ -277,8 +283,9 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     }
     check_in_workspace::<S, NX, K>("start", &x0)
         .with_context(|| format!("start {:?} m", opts.start_m))?;
+    let plant_model = opts.mismatch.apply(&model)?;
     let mut plant = Plant::new(
-        model.clone(),
+        plant_model.clone(),
         x0.clone(),
         opts.disturbance.clone(),
         if opts.sampling == Sampling::Ideal {
@@ -378,6 +385,14 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
                 .cycle(if lost { None } else { Some(&z) })
                 .map_err(|e| anyhow::anyhow!("{e:?}"))?;
             max_ns = max_ns.max(started.elapsed().as_nanos() as u64);
+            if !lost {
+                statuses.frames.received += 1;
+                match out.status {
+                    RuntimeStatus::MeasurementRejected => statuses.frames.rejected += 1,
+                    RuntimeStatus::Reacquired => statuses.frames.reacquired += 1,
+                    _ => {}
+                }
+            }
             out
         };
         statuses.count(out.status);
@@ -416,9 +431,20 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         final_target.to_vec(),
         metrics,
     );
+    if !opts.mismatch.is_nominal() {
+        let (drag, gain) = opts.mismatch.factors(NX / 2)?;
+        report.plant = Some(PlantReport {
+            drag_scale: drag,
+            gain_scale: gain,
+            params: ModelParams::from_model(&plant_model),
+        });
+    }
     report.sampling = Some(opts.sampling.name().to_string());
     report.seed = Some(opts.seed);
     report.fallback_cycles = Some(statuses.fallback);
+    if opts.sampling != Sampling::Ideal {
+        report.frames = Some(statuses.frames);
+    }
     report.tier_cycles = Some(TierCycles {
         explicit: statuses.explicit,
         refined: statuses.refined,
@@ -484,6 +510,7 @@ struct StatusCounts {
     /// Cycles whose plan came from each tier.
     explicit: usize,
     refined: usize,
+    frames: FrameCounts,
 }
 
 /// The runtime's refinement setting for the config's.

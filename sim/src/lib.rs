@@ -21,6 +21,7 @@
 
 pub mod closed_loop;
 pub mod metrics;
+pub mod mismatch;
 pub mod plant;
 pub mod qp_map;
 pub mod reach;

@@ -40,6 +40,8 @@ pub struct ReachOptions {
     /// Extra delay after each tracking phase, s (odd scanner timing); None:
     /// the config's `scanner.extra_delay_s`.
     pub extra_delay_s: Option<f64>,
+    /// How the simulated capsules differ from the model (none by default).
+    pub mismatch: crate::mismatch::PlantMismatch,
 }
 
 /// Simulated time per run when none is given: 3 s plus 0.5 s per cm of the
@@ -173,6 +175,7 @@ pub fn reach_map(
             run_opts.start_m = start.clone();
             run_opts.seed = opts.seed;
             run_opts.duration_s = duration_s;
+            run_opts.mismatch = opts.mismatch.clone();
             if let Some(d) = opts.extra_delay_s {
                 run_opts.extra_delay_s = d;
             }

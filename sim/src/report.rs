@@ -48,6 +48,17 @@ impl ModelParams {
     }
 }
 
+/// The simulated capsules when they differ from the model the controller
+/// was generated for (`--plant-drag-scale`, `--plant-gain-scale`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlantReport {
+    /// Factor on each capsule's drag and gain.
+    pub drag_scale: Vec<f64>,
+    pub gain_scale: Vec<f64>,
+    /// The plant's constants (`params` holds the model's).
+    pub params: ModelParams,
+}
+
 /// Everything `simulate --json` writes. Arrays `t`, `x`, `u`, `phase` are
 /// row-aligned with the plant records (`u[k]` and `phase[k]` hold from `t[k]`
 /// to `t[k+1]`); `x[k]` is the true state [x1, v1, x2, v2, ...] in m, m/s.
@@ -62,6 +73,9 @@ pub struct RunReport {
     /// Target state [x1, v1, x2, v2, ...], m and m/s.
     pub target: Vec<f64>,
     pub metrics: Metrics,
+    /// The plant when it differs from the model (None: the plant is the model).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plant: Option<PlantReport>,
     /// Scenario name ("A", "C", "custom", ...).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario: Option<String>,
@@ -82,6 +96,20 @@ pub struct RunReport {
     /// Cycles whose plan each solver tier produced.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tier_cycles: Option<TierCycles>,
+    /// How the controller took the tracking frames (scanner-cycle samplings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames: Option<FrameCounts>,
+}
+
+/// Tracking frames by what the controller did with them: `rejected` counts
+/// frames it ignored (gated out, part of a glitch, or invalid; the plant
+/// simulator's frames are all true ones plus noise), `reacquired` the
+/// cycles in which its estimate jumped to the frames.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FrameCounts {
+    pub received: usize,
+    pub rejected: usize,
+    pub reacquired: usize,
 }
 
 /// Cycles per solver tier (`explicit`: the explicit tier's plan was played;
@@ -111,10 +139,12 @@ impl RunReport {
             params: ModelParams::from_model(model),
             target,
             metrics,
+            plant: None,
             scenario: None,
             sampling: None,
             fallback_cycles: None,
             tier_cycles: None,
+            frames: None,
             disturbance: None,
             seed: None,
             d: None,

@@ -34,7 +34,9 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         start_m: start_positions(args.start.as_deref(), config.capsule_count())?,
         duration_s: args.duration,
         extra_delay_s: crate::cli::extra_delay_for(args.sampling, args.extra_delay)?,
+        mismatch: crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale),
     };
+    opts.mismatch.factors(config.capsule_count())?;
     let targets = capsule_mpc_sim::reach::grid_targets(
         &if opts.start_m.is_empty() {
             vec![0.0; config.capsule_count()]
@@ -91,7 +93,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         fmt(summary.worst_settle_time_s),
     );
     if let Some(path) = &args.json {
-        let json = serde_json::json!({
+        let mut json = serde_json::json!({
             "sampling": sampling.name(),
             "disturbance": format!("{disturbance:?}").to_lowercase(),
             "disturbance_model": disturbance_kind_name(opts.disturbance_kind),
@@ -102,6 +104,10 @@ pub fn run(args: &ReachArgs) -> Result<()> {
             "summary": summary,
             "points": points,
         });
+        if !opts.mismatch.is_nominal() {
+            let (drag, gain) = opts.mismatch.factors(config.capsule_count())?;
+            json["plant"] = serde_json::json!({"drag_scale": drag, "gain_scale": gain});
+        }
         write_json_atomic(path, &json)?;
     }
     if let Some(dir) = &args.plot {

@@ -30,6 +30,8 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     opts.compensate_delay = !args.no_delay_compensation;
     opts.lose_every = args.lose_every;
     opts.hold = !args.no_hold;
+    opts.mismatch = crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale);
+    opts.mismatch.factors(model.capsule_count())?;
     if let Some(r) = args.refine {
         opts.refine = r.into();
     }

@@ -220,6 +220,8 @@ mod tests {
             d: None,
             fallback_cycles: None,
             tier_cycles: None,
+            plant: None,
+            frames: None,
         }
     }
 }

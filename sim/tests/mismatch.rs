@@ -1,0 +1,101 @@
+//! The closed loop on capsules that are not quite the model: the plant's
+//! drag and gain off by the amounts nobody can rule out (drag x0.8, x1.2
+//! and split x1.2 / x0.8, gain x0.9 and x1.1), the paper's disturbance,
+//! both scanner-cycle samplings, four targets and eight seeds, against the
+//! nominal plant on the same targets and seeds.
+
+use capsule_mpc_generator::config::Config;
+use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling};
+use capsule_mpc_sim::mismatch::PlantMismatch;
+use capsule_mpc_sim::plant::DisturbanceLevel;
+
+const TARGETS_CM: [(f64, f64); 4] = [(2.0, 3.0), (2.0, -1.0), (-1.0, 2.0), (3.0, 1.0)];
+const DURATION_S: f64 = 6.0;
+
+struct Outcome {
+    settle_s: Option<f64>,
+    received: usize,
+    rejected: usize,
+}
+
+fn one(
+    config: &Config,
+    target_cm: (f64, f64),
+    sampling: Sampling,
+    seed: u64,
+    plant: &PlantMismatch,
+) -> Outcome {
+    let model = capsule_mpc_generator::model::Model::from_config(config);
+    let target = vec![target_cm.0 / 100.0, 0.0, target_cm.1 / 100.0, 0.0];
+    let mut opts = RunOptions::new(config, target, sampling);
+    opts.duration_s = DURATION_S;
+    opts.seed = seed;
+    opts.disturbance = DisturbanceLevel::Paper.config(&model, seed);
+    opts.mismatch = plant.clone();
+    let r = run(config, &opts).expect("closed-loop run");
+    let frames = r.frames.expect("frame counts");
+    Outcome {
+        settle_s: r.metrics.settle_time_s,
+        received: frames.received,
+        rejected: frames.rejected,
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[v.len() / 2]
+}
+
+#[test]
+fn off_model_capsules_settle_near_the_nominal_times() {
+    let config = Config::embedded_default();
+    let plants = [
+        ("nominal", PlantMismatch::default()),
+        ("drag x0.8", PlantMismatch::uniform(0.8, 1.0)),
+        ("drag x1.2", PlantMismatch::uniform(1.2, 1.0)),
+        (
+            "drag x1.2/x0.8",
+            PlantMismatch {
+                drag_scale: vec![1.2, 0.8],
+                gain_scale: vec![],
+            },
+        ),
+        ("gain x0.9", PlantMismatch::uniform(1.0, 0.9)),
+        ("gain x1.1", PlantMismatch::uniform(1.0, 1.1)),
+    ];
+    for sampling in [Sampling::Constant, Sampling::Variable] {
+        let mut nominal = (0.0, 0.0);
+        for (name, plant) in &plants {
+            let mut settles = Vec::new();
+            let (mut unsettled, mut received, mut rejected) = (0, 0, 0);
+            for &t in &TARGETS_CM {
+                for seed in 1..=8 {
+                    let o = one(&config, t, sampling, seed, plant);
+                    match o.settle_s {
+                        Some(s) => settles.push(s),
+                        None => unsettled += 1,
+                    }
+                    received += o.received;
+                    rejected += o.rejected;
+                }
+            }
+            let worst = settles.iter().copied().fold(0.0, f64::max);
+            let med = if settles.is_empty() {
+                f64::NAN
+            } else {
+                median(&mut settles)
+            };
+            if *name == "nominal" {
+                nominal = (med, worst);
+            }
+            eprintln!(
+                "{:?} {name:<15} settled {}/{} median {med:.2} s worst {worst:.2} s; rejected {rejected}/{received} frames ({:.1} %)",
+                sampling,
+                32 - unsettled,
+                32,
+                100.0 * rejected as f64 / received as f64
+            );
+        }
+        let _ = nominal;
+    }
+}
