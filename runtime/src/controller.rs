@@ -55,6 +55,10 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     /// Gated-out frames since the last accepted one (see
     /// `ControllerSettings::reacquire_after_rejections`).
     gated_rejections: usize,
+    /// Per capsule: how far (m) and how fast (m/s) it may have drifted
+    /// from the prediction since the last accepted frame because the model
+    /// is not the plant (see `accumulate_model_drift`).
+    model_drift: [[f64; 2]; NX],
     /// Re-acquisition candidate: a filter started at the first gated-out
     /// frame and updated with the gated-out frames that agree with it, so
     /// that a re-acquired estimate has speeds from the frames.
@@ -110,6 +114,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             hold_release_speed_m_per_s: HOLD_RELEASE_SPEED_M_PER_S,
             reacquire_after_rejections: REACQUIRE_AFTER_REJECTIONS,
             glitch_frames: GLITCH_FRAMES,
+            model_gain_uncertainty: MODEL_GAIN_UNCERTAINTY,
+            model_drag_uncertainty: MODEL_DRAG_UNCERTAINTY,
         }
     }
 
@@ -132,6 +138,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             planned_phase_samples: settings.max_actuation_samples,
             mean_gain: mean_gradient_gain::<S, NX, K>(),
             gated_rejections: 0,
+            model_drift: [[0.0; 2]; NX],
             candidate: [CapsuleFilter::new(0.0, 0.0); NX],
             candidate_frames: 0,
             replaced: [CapsuleFilter::new(0.0, 0.0); NX],
@@ -162,6 +169,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.filters[i] = CapsuleFilter::new(p, std);
         }
         self.gated_rejections = 0;
+        self.model_drift = [[0.0; 2]; NX];
         self.candidate_frames = 0;
         self.has_replaced = false;
         self.confirmed_frames = 0;

@@ -3,6 +3,12 @@
 //! and split x1.2 / x0.8, gain x0.9 and x1.1), the paper's disturbance,
 //! both scanner-cycle samplings, four targets and eight seeds, against the
 //! nominal plant on the same targets and seeds.
+//!
+//! Asserted: the frame gate takes a capsule off the model for what it is,
+//! not for a tracking glitch (at most 1 % of the true frames rejected on
+//! every plant), and the nominal plant settles every run. Printed: settled
+//! runs and settle times per plant (docs/known-limits.md quotes them: the
+//! end game off the model is slow, the open part of issue 26).
 
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling};
@@ -87,7 +93,15 @@ fn off_model_capsules_settle_near_the_nominal_times() {
             };
             if *name == "nominal" {
                 nominal = (med, worst);
+                assert_eq!(
+                    unsettled, 0,
+                    "{sampling:?}: the nominal plant left {unsettled} runs unsettled"
+                );
             }
+            assert!(
+                rejected as f64 <= 0.01 * received as f64,
+                "{sampling:?} {name}: {rejected} of {received} true frames rejected"
+            );
             eprintln!(
                 "{:?} {name:<15} settled {}/{} median {med:.2} s worst {worst:.2} s; rejected {rejected}/{received} frames ({:.1} %)",
                 sampling,
@@ -96,6 +110,9 @@ fn off_model_capsules_settle_near_the_nominal_times() {
                 100.0 * rejected as f64 / received as f64
             );
         }
-        let _ = nominal;
+        eprintln!(
+            "{sampling:?} nominal: median {:.2} s, worst {:.2} s",
+            nominal.0, nominal.1
+        );
     }
 }

@@ -93,6 +93,10 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// One capsule over `duration_s` at constant `u`: new (x, v) and the
     /// 2x2 Jacobian d(x, v)/d(x0, v0) (row major), for the estimator.
     fn capsule_transition(i: usize, xv: [f64; 2], u: f64, duration_s: f64) -> ([f64; 2], [f64; 4]);
+    /// Capsule `i`'s magnetic acceleration per gradient (m/s^2 per T/m)
+    /// and its drag acceleration at speed `v` (m/s^2), as the model has them.
+    fn capsule_gain(i: usize) -> f64;
+    fn capsule_drag(i: usize, v: f64) -> f64;
 }
 
 impl<
@@ -175,5 +179,19 @@ impl<
     }
     fn capsule_transition(i: usize, xv: [f64; 2], u: f64, duration_s: f64) -> ([f64; 2], [f64; 4]) {
         capsule_transition::<S, M, NX>(i, xv, u, duration_s)
+    }
+    fn capsule_gain(i: usize) -> f64 {
+        if i < M {
+            S::G[i]
+        } else {
+            0.0
+        }
+    }
+    fn capsule_drag(i: usize, v: f64) -> f64 {
+        if i < M {
+            S::DRAG[i].accel_and_slope(v).0
+        } else {
+            0.0
+        }
     }
 }

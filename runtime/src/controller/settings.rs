@@ -97,6 +97,11 @@ pub struct ControllerSettings {
     /// many frames in a row; the next one re-acquires (never before
     /// `reacquire_after_rejections`).
     pub glitch_frames: usize,
+    /// Relative uncertainty of the model's magnetic gain and of its drag,
+    /// which the estimator adds to its process noise (fractions; 0 trusts
+    /// the model exactly). Real capsules are known to 10-20 %.
+    pub model_gain_uncertainty: f64,
+    pub model_drag_uncertainty: f64,
 }
 impl ControllerSettings {
     /// Tracking phase + extra delay: the zero-gradient wait between a
@@ -181,6 +186,21 @@ pub const REACQUIRE_AFTER_REJECTIONS: usize = 5;
 /// Default `ControllerSettings::glitch_frames`: 0.8 s of tracking frames at
 /// the default constant sampling.
 pub const GLITCH_FRAMES: usize = 20;
+/// Default `ControllerSettings::model_gain_uncertainty` and
+/// `model_drag_uncertainty`: the magnetization and the effective mass are
+/// known to about 10 %, the drag coefficient to about 20 %.
+pub const MODEL_GAIN_UNCERTAINTY: f64 = 0.1;
+pub const MODEL_DRAG_UNCERTAINTY: f64 = 0.2;
+/// Share of the model-error speed drift kept after an accepted frame (the
+/// frame corrects the position at once, the speed over a few frames).
+pub const MODEL_DRIFT_SPEED_KEPT: f64 = 0.8;
+/// Largest model drift the gate allows for, m: a capsule within 10-20 %
+/// of the model drifts a few mm from the prediction over the longest
+/// actuation phase (10 samples at u_max: 14 mm for a 10 % gain error), and
+/// tracking glitches beyond it stay recognized as such.
+pub const MODEL_DRIFT_MAX_M: f64 = 0.008;
+/// Largest model uncertainty accepted (a factor of two).
+pub const MAX_MODEL_UNCERTAINTY: f64 = 1.0;
 /// Accepted frames after which an estimate counts as established (see
 /// `ControllerSettings::glitch_frames`).
 pub const ESTABLISHED_AFTER_FRAMES: usize = 2;
@@ -251,7 +271,7 @@ pub const MIN_ACCEL_PSD: f64 = 1.0e-6;
 
 /// Every name `RuntimeError::BadSetting` can carry (the settings that are
 /// range-checked), for hosts and tests that map errors back to fields.
-pub const SETTING_NAMES: [&str; 11] = [
+pub const SETTING_NAMES: [&str; 13] = [
     "refine",
     "tracking_time_s",
     "extra_delay_s",
@@ -263,6 +283,8 @@ pub const SETTING_NAMES: [&str; 11] = [
     "hold_release_position_m",
     "hold_release_speed_m_per_s",
     "reacquire_after_rejections",
+    "model_gain_uncertainty",
+    "model_drag_uncertainty",
 ];
 
 /// `has_explicit_tier`: whether the solver has explicit-tier data (a
@@ -309,6 +331,13 @@ pub(super) fn check_settings(
     }
     if s.reacquire_after_rejections == 1 {
         return Err(RuntimeError::BadSetting("reacquire_after_rejections"));
+    }
+    let fraction = |v: f64| (0.0..=MAX_MODEL_UNCERTAINTY).contains(&v);
+    if !fraction(s.model_gain_uncertainty) {
+        return Err(RuntimeError::BadSetting("model_gain_uncertainty"));
+    }
+    if !fraction(s.model_drag_uncertainty) {
+        return Err(RuntimeError::BadSetting("model_drag_uncertainty"));
     }
     Ok(())
 }

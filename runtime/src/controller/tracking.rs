@@ -161,6 +161,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         match class {
             Measurement::Invalid => RuntimeStatus::MeasurementRejected,
             Measurement::Accepted => {
+                self.settle_model_drift();
                 self.gated_rejections = 0;
                 self.candidate_frames = 0;
                 self.confirmed_frames = self.confirmed_frames.saturating_add(1);
@@ -237,6 +238,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     /// The estimate jumped (re-acquired): forget the counters and the plan.
     pub(super) fn after_reacquisition(&mut self) {
+        self.model_drift = [[0.0; 2]; NX];
         self.gated_rejections = 0;
         self.candidate_frames = 0;
         self.confirmed_frames = 0;
@@ -246,6 +248,40 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.replan_legs(&x);
         }
         self.restart_plan();
+    }
+
+    /// How far the capsules may have drifted from the prediction because
+    /// the model is not the plant: the capsule's gain and drag are known to
+    /// 10-20 % at best (`model_gain_uncertainty`, `model_drag_uncertainty`),
+    /// so the predicted acceleration may be off by that fraction of its
+    /// magnetic and drag parts, coherently, over the whole time since the
+    /// last accepted frame. The gate widens by it (the filter itself is
+    /// not told: its estimate on the model stays as sharp as before), so
+    /// that true frames of a capsule off the model are not taken for a
+    /// glitch after a long actuation phase.
+    pub(super) fn accumulate_model_drift(&mut self, u: f64, duration_s: f64) {
+        let (gain_err, drag_err) = (
+            self.settings.model_gain_uncertainty,
+            self.settings.model_drag_uncertainty,
+        );
+        let t = duration_s;
+        for i in 0..NX / 2 {
+            let v = self.filters[i].mean[1];
+            let accel_err = gain_err * libm::fabs(S::capsule_gain(i) * u)
+                + drag_err * libm::fabs(S::capsule_drag(i, v));
+            let d = &mut self.model_drift[i];
+            d[0] = (d[0] + d[1] * t + 0.5 * accel_err * t * t).min(MODEL_DRIFT_MAX_M);
+            d[1] += accel_err * t;
+        }
+    }
+
+    /// An accepted frame corrects the position drift at once and the speed
+    /// drift over a few frames (`MODEL_DRIFT_SPEED_KEPT`).
+    pub(super) fn settle_model_drift(&mut self) {
+        for d in self.model_drift[..NX / 2].iter_mut() {
+            d[0] = 0.0;
+            d[1] *= MODEL_DRIFT_SPEED_KEPT;
+        }
     }
 
     /// Invalid when any position is non-finite or beyond
@@ -258,7 +294,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             return Measurement::Invalid;
         }
         let r = sq(self.settings.position_noise_m.max(1e-6));
-        if within_gate(&self.filters[..NX / 2], z, r) {
+        if within_widened_gate(&self.filters[..NX / 2], z, r, &self.model_drift[..NX / 2]) {
             Measurement::Accepted
         } else {
             Measurement::GatedOut
@@ -279,6 +315,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
         };
         let m = NX / 2;
+        self.accumulate_model_drift(u, duration_s);
         predict(&mut self.filters[..m]);
         if self.candidate_frames > 0 {
             predict(&mut self.candidate[..m]);
