@@ -1,7 +1,7 @@
 //! The scanner-cycle controller: estimator + generated solver + switching
 //! rule + fault handling, in one fixed-size struct.
 
-use crate::estimator::CapsuleFilter;
+use crate::estimator::{CapsuleFilter, ScaleEstimate};
 use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
     PaperConstants, TightInputs,
@@ -59,6 +59,11 @@ pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     /// from the prediction since the last accepted frame because the model
     /// is not the plant (see `accumulate_model_drift`).
     model_drift: [[f64; 2]; NX],
+    /// Per capsule: the estimate of its gain and drag factors against the
+    /// model, and the factors in use (estimator and refinement; 1 until
+    /// the estimate differs from the model significantly).
+    scales: [ScaleEstimate; NX],
+    applied_scales: [[f64; 2]; NX],
     /// Re-acquisition candidate: a filter started at the first gated-out
     /// frame and updated with the gated-out frames that agree with it, so
     /// that a re-acquired estimate has speeds from the frames.
@@ -139,6 +144,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             mean_gain: mean_gradient_gain::<S, NX, K>(),
             gated_rejections: 0,
             model_drift: [[0.0; 2]; NX],
+            scales: [ScaleEstimate::new(
+                settings.model_gain_uncertainty,
+                settings.model_drag_uncertainty,
+            ); NX],
+            applied_scales: [[1.0, 1.0]; NX],
             candidate: [CapsuleFilter::new(0.0, 0.0); NX],
             candidate_frames: 0,
             replaced: [CapsuleFilter::new(0.0, 0.0); NX],

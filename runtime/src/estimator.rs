@@ -111,6 +111,117 @@ impl CapsuleFilter {
     }
 }
 
+/// Per capsule: how it differs from the model, as factors on its magnetic
+/// gain and on its drag (1 = the model), estimated from the frames with the
+/// kinematic filter's innovations (a two-stage filter: the kinematic
+/// filter stays the model's 2-state EKF, this one carries the sensitivity
+/// of its prediction to the factors since the last frame and regresses the
+/// innovation on it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScaleEstimate {
+    /// Factors [gain, drag].
+    pub mean: [f64; 2],
+    /// Their covariance (row major 2x2).
+    pub cov: [f64; 4],
+    /// d(x, v)/d(factors) of the kinematic estimate (rows x, v; columns
+    /// gain, drag).
+    pub sens: [f64; 4],
+}
+
+/// Random walk of the factors, per second (variance): they are constants
+/// of the capsule, but a slow drift (warming, a shell filling) is allowed.
+pub const SCALE_DRIFT_PER_S: f64 = 1.0e-5;
+
+impl ScaleEstimate {
+    /// The model (factors 1) with standard deviations `gain_std`, `drag_std`.
+    pub const fn new(gain_std: f64, drag_std: f64) -> ScaleEstimate {
+        ScaleEstimate {
+            mean: [1.0, 1.0],
+            cov: [gain_std * gain_std, 0.0, 0.0, drag_std * drag_std],
+            sens: [0.0; 4],
+        }
+    }
+
+    /// Time update: the kinematic step had Jacobian `a` (d(x,v)/d(x0,v0))
+    /// and `b` (d(x,v)/d(factors) at fixed start, columns gain and drag).
+    pub fn predict(&mut self, a: [f64; 4], b: [f64; 4], duration_s: f64) {
+        let p = self.sens;
+        self.sens = [
+            a[0] * p[0] + a[1] * p[2] + b[0],
+            a[0] * p[1] + a[1] * p[3] + b[1],
+            a[2] * p[0] + a[3] * p[2] + b[2],
+            a[2] * p[1] + a[3] * p[3] + b[3],
+        ];
+        let q = SCALE_DRIFT_PER_S * duration_s.max(0.0);
+        self.cov[0] += q;
+        self.cov[3] += q;
+    }
+
+    /// Measurement update with the kinematic filter's innovation
+    /// `innovation_m` (frame minus prediction made with factors `used`) of
+    /// variance `s_m2` (its P_xx + R). Returns the change of the factors'
+    /// mean times the sensitivity: the correction (dx, dv) the kinematic
+    /// estimate owes to it.
+    pub fn update(&mut self, innovation_m: f64, s_m2: f64, used: [f64; 2]) -> [f64; 2] {
+        let h = [self.sens[0], self.sens[1]];
+        let p = self.cov;
+        let ph = [p[0] * h[0] + p[1] * h[1], p[2] * h[0] + p[3] * h[1]];
+        let s = s_m2 + h[0] * ph[0] + h[1] * ph[1];
+        if !(s > 0.0) {
+            return [0.0, 0.0];
+        }
+        // The prediction used `used`, not the mean: what the mean predicts
+        // on top of it is part of the expected innovation.
+        let expected = h[0] * (self.mean[0] - used[0]) + h[1] * (self.mean[1] - used[1]);
+        let r = innovation_m - expected;
+        let k = [ph[0] / s, ph[1] / s];
+        let d = [k[0] * r, k[1] * r];
+        self.mean[0] += d[0];
+        self.mean[1] += d[1];
+        self.cov = [
+            p[0] - k[0] * ph[0],
+            p[1] - k[0] * ph[1],
+            p[2] - k[1] * ph[0],
+            p[3] - k[1] * ph[1],
+        ];
+        let off = 0.5 * (self.cov[1] + self.cov[2]);
+        self.cov[1] = off;
+        self.cov[2] = off;
+        [
+            self.sens[0] * d[0] + self.sens[1] * d[1],
+            self.sens[2] * d[0] + self.sens[3] * d[1],
+        ]
+    }
+
+    /// The kinematic update with gains `k` (position, speed) took part of
+    /// the innovation into the estimate: its sensitivity shrinks alike.
+    pub fn after_kinematic_update(&mut self, k: [f64; 2]) {
+        let p = self.sens;
+        self.sens = [
+            (1.0 - k[0]) * p[0],
+            (1.0 - k[0]) * p[1],
+            p[2] - k[1] * p[0],
+            p[3] - k[1] * p[1],
+        ];
+    }
+
+    /// The factors to use: each where it differs from the model by more
+    /// than `sigmas` standard deviations, else the model's 1.
+    pub fn significant(&self, sigmas: f64) -> [f64; 2] {
+        let pick = |m: f64, var: f64| {
+            if libm::fabs(m - 1.0) > sigmas * libm::sqrt(var.max(0.0)) {
+                m
+            } else {
+                1.0
+            }
+        };
+        [
+            pick(self.mean[0], self.cov[0]),
+            pick(self.mean[1], self.cov[3]),
+        ]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

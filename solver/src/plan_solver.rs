@@ -6,7 +6,9 @@ use crate::lookup::{chain_time_s, covers_from_rest, first_leg, qp_iterations_mea
 use crate::qp::QpEngine;
 use crate::refine::Solver;
 use crate::report::{Leg, SolveReport};
-use crate::rollout::{capsule_transition, predict, predict_constant, stage_cost};
+use crate::rollout::{
+    capsule_transition, capsule_transition_scaled, predict, predict_constant, stage_cost,
+};
 use crate::spec::Spec;
 use crate::tables::TableError;
 
@@ -93,6 +95,17 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// One capsule over `duration_s` at constant `u`: new (x, v) and the
     /// 2x2 Jacobian d(x, v)/d(x0, v0) (row major), for the estimator.
     fn capsule_transition(i: usize, xv: [f64; 2], u: f64, duration_s: f64) -> ([f64; 2], [f64; 4]);
+    /// The refinement rolls plans out with capsule `i`'s gain and drag
+    /// scaled by `scales[i]` ([gain, drag]; missing entries read as 1).
+    fn set_model_scales(&mut self, scales: &[[f64; 2]]);
+    /// As `capsule_transition`, with the capsule's gain and drag scaled.
+    fn capsule_transition_scaled(
+        i: usize,
+        xv: [f64; 2],
+        u: f64,
+        duration_s: f64,
+        scale: [f64; 2],
+    ) -> ([f64; 2], [f64; 4]);
     /// Capsule `i`'s magnetic acceleration per gradient (m/s^2 per T/m)
     /// and its drag acceleration at speed `v` (m/s^2), as the model has them.
     fn capsule_gain(i: usize) -> f64;
@@ -179,6 +192,22 @@ impl<
     }
     fn capsule_transition(i: usize, xv: [f64; 2], u: f64, duration_s: f64) -> ([f64; 2], [f64; 4]) {
         capsule_transition::<S, M, NX>(i, xv, u, duration_s)
+    }
+    fn set_model_scales(&mut self, scales: &[[f64; 2]]) {
+        let mut s = [[1.0, 1.0]; M];
+        for (d, v) in s.iter_mut().zip(scales) {
+            *d = *v;
+        }
+        Solver::set_model_scales(self, &s);
+    }
+    fn capsule_transition_scaled(
+        i: usize,
+        xv: [f64; 2],
+        u: f64,
+        duration_s: f64,
+        scale: [f64; 2],
+    ) -> ([f64; 2], [f64; 4]) {
+        capsule_transition_scaled::<S, M, NX>(i, xv, u, duration_s, scale)
     }
     fn capsule_gain(i: usize) -> f64 {
         if i < M {

@@ -15,7 +15,8 @@ use crate::lookup::{lookup_fine, lookup_tail_for};
 use crate::qp::{clamp_u, ActiveSet, BoxQp, QpEngine};
 use crate::report::{SolveReport, SolveStatus, Tier};
 use crate::rollout::{
-    rollout_cost, rollout_cost_below, rollout_with_jacobians, substep_s, Schedule, StepJacobian,
+    nominal_scales, rollout_cost_below_scaled, rollout_with_jacobians_scaled, substep_s,
+    ModelScales, Schedule, StepJacobian,
 };
 use crate::spec::Spec;
 use core::marker::PhantomData;
@@ -58,6 +59,9 @@ pub struct Solver<S, const M: usize, const NX: usize, const N: usize, const K: u
     tier: Tier,
     /// The refinement's window QP solver.
     engine: E,
+    /// The model the refinement rolls plans out on: factors on each
+    /// capsule's gain and drag (1: the model; see `set_model_scales`).
+    scales: ModelScales<M>,
     spec: PhantomData<S>,
 }
 
@@ -114,8 +118,16 @@ impl<
             explicit_active: [0; N],
             tier: Tier::Refined,
             engine,
+            scales: nominal_scales(),
             spec: PhantomData,
         }
+    }
+
+    /// Rolls plans out on the model with each capsule's gain and drag
+    /// scaled by `scales[i]` (the runtime's estimate of the real capsules;
+    /// stored plans and the explicit tier stay the model's).
+    pub fn set_model_scales(&mut self, scales: &ModelScales<M>) {
+        self.scales = *scales;
     }
 
     /// The refinement's QP engine.
@@ -248,10 +260,11 @@ impl<
 
     /// Rolls the current plan out from `e` into `states`, `end_state` and `jac`.
     fn roll_out(&mut self, e: &[f64; NX]) -> f64 {
-        rollout_with_jacobians::<S, M, NX, K>(
+        rollout_with_jacobians_scaled::<S, M, NX, K>(
             e,
             &self.plan,
             &self.schedule,
+            &self.scales,
             &mut self.states,
             &mut self.end_state,
             &mut self.jac,
@@ -291,8 +304,13 @@ impl<
             };
             match found {
                 Some(()) => {
-                    let c =
-                        rollout_cost_below::<S, M, NX, K>(e, &self.candidate, &self.schedule, cost);
+                    let c = rollout_cost_below_scaled::<S, M, NX, K>(
+                        e,
+                        &self.candidate,
+                        &self.schedule,
+                        &self.scales,
+                        cost,
+                    );
                     if c < cost {
                         self.plan = self.candidate;
                         cost = c;
@@ -321,7 +339,13 @@ impl<
         if explicit_pending && cost == f64::INFINITY {
             // No plan and no stored tail: the explicit plan is the start.
             self.plan = self.explicit_plan;
-            cost = rollout_cost::<S, M, NX, K>(e, &self.plan, &self.schedule);
+            cost = rollout_cost_below_scaled::<S, M, NX, K>(
+                e,
+                &self.plan,
+                &self.schedule,
+                &self.scales,
+                f64::INFINITY,
+            );
             fresh = false;
             self.tier = Tier::Explicit;
             explicit_pending = false;
@@ -349,7 +373,13 @@ impl<
             it += 1;
         }
         if explicit_pending {
-            let c = rollout_cost_below::<S, M, NX, K>(e, &self.explicit_plan, &self.schedule, cost);
+            let c = rollout_cost_below_scaled::<S, M, NX, K>(
+                e,
+                &self.explicit_plan,
+                &self.schedule,
+                &self.scales,
+                cost,
+            );
             if c < cost {
                 // `states` and `jac` still describe the refined plan; the
                 // next solve rolls the plan out again (`fresh` is per call).
@@ -380,7 +410,13 @@ impl<
                 self.candidate[j] = clamp_u(self.plan[j] + step * self.qp.x[j], S::U_MAX_T_PER_M);
                 j += 1;
             }
-            let c = rollout_cost_below::<S, M, NX, K>(e, &self.candidate, &self.schedule, cost);
+            let c = rollout_cost_below_scaled::<S, M, NX, K>(
+                e,
+                &self.candidate,
+                &self.schedule,
+                &self.scales,
+                cost,
+            );
             if c < cost {
                 self.plan = self.candidate;
                 return (c, iters, converged);

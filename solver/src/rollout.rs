@@ -94,6 +94,16 @@ impl Schedule {
     }
 }
 
+/// Per capsule: factors on the model's magnetic gain and drag (the
+/// runtime's estimate of how the capsules differ from the model; 1 is the
+/// model itself, and then every result is bit for bit the model's).
+pub type ModelScales<const M: usize> = [[f64; 2]; M];
+
+/// The model itself.
+pub const fn nominal_scales<const M: usize>() -> ModelScales<M> {
+    [[1.0, 1.0]; M]
+}
+
 /// The RK4 sub-step of a plan sample, s.
 #[inline(always)]
 pub fn substep_s<S: Spec<M, NX>, const M: usize, const NX: usize>() -> f64 {
@@ -109,11 +119,13 @@ pub fn rk4_capsule<S: Spec<M, NX>, const M: usize, const NX: usize>(
     v: f64,
     u: f64,
     h: f64,
+    scale: [f64; 2],
 ) -> ([f64; 2], [f64; 4], [f64; 2]) {
     const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
     const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
-    let g = S::G[i];
+    let g = S::G[i] * scale[0];
     let drag = S::DRAG[i];
+    let drag_scale = scale[1];
     let mut k_prev_v = 0.0;
     let mut dk_prev = [0.0f64; 2]; // d k_prev[v] / d (x0, v0)
     let mut dku_prev = 0.0;
@@ -127,6 +139,7 @@ pub fn rk4_capsule<S: Spec<M, NX>, const M: usize, const NX: usize>(
         let dv = [ch * dk_prev[0], 1.0 + ch * dk_prev[1]];
         let dvu = ch * dku_prev;
         let (acc, slope) = drag.accel_and_slope(vs);
+        let (acc, slope) = (acc * drag_scale, slope * drag_scale);
         let kv = acc + g * u;
         let wh = W[stage] * h / 6.0;
         next[0] += wh * vs;
@@ -170,6 +183,7 @@ fn sample_all<S: Spec<M, NX>, const M: usize, const NX: usize, const JAC: bool>(
     u: f64,
     k: usize,
     schedule: &Schedule,
+    scales: &ModelScales<M>,
     jac: &mut StepJacobian<M>,
 ) {
     let h = substep_s::<S, M, NX>();
@@ -183,7 +197,8 @@ fn sample_all<S: Spec<M, NX>, const M: usize, const NX: usize, const JAC: bool>(
     while n < S::RK4_SUBSTEPS {
         let mut i = 0;
         while i < M {
-            let (next, sa, sb) = rk4_capsule::<S, M, NX>(i, e[2 * i], e[2 * i + 1], u, h);
+            let (next, sa, sb) =
+                rk4_capsule::<S, M, NX>(i, e[2 * i], e[2 * i + 1], u, h, scales[i]);
             if JAC {
                 let b = jac.b[i];
                 jac.a[i] = mat2_mul(&sa, &jac.a[i]);
@@ -207,8 +222,14 @@ fn sample_all<S: Spec<M, NX>, const M: usize, const NX: usize, const JAC: bool>(
     while n < coast_steps {
         let mut i = 0;
         while i < M {
-            let (next, sa, _) =
-                rk4_capsule::<S, M, NX>(i, e[2 * i], e[2 * i + 1], 0.0, schedule.coast_h_s);
+            let (next, sa, _) = rk4_capsule::<S, M, NX>(
+                i,
+                e[2 * i],
+                e[2 * i + 1],
+                0.0,
+                schedule.coast_h_s,
+                scales[i],
+            );
             if JAC {
                 let b = jac.b[i];
                 jac.a[i] = mat2_mul(&sa, &jac.a[i]);
@@ -263,6 +284,22 @@ pub fn rollout_cost_below<S: Spec<M, NX>, const M: usize, const NX: usize, const
     schedule: &Schedule,
     bound: f64,
 ) -> f64 {
+    rollout_cost_below_scaled::<S, M, NX, K>(e0, plan, schedule, &nominal_scales(), bound)
+}
+
+/// [`rollout_cost_below`] on the model with `scales` applied.
+pub fn rollout_cost_below_scaled<
+    S: Spec<M, NX>,
+    const M: usize,
+    const NX: usize,
+    const K: usize,
+>(
+    e0: &[f64; NX],
+    plan: &[f64; K],
+    schedule: &Schedule,
+    scales: &ModelScales<M>,
+    bound: f64,
+) -> f64 {
     let mut e = *e0;
     let mut unused = StepJacobian::ZERO;
     let mut cost = 0.0;
@@ -272,7 +309,7 @@ pub fn rollout_cost_below<S: Spec<M, NX>, const M: usize, const NX: usize, const
         if cost >= bound {
             return f64::INFINITY;
         }
-        sample_all::<S, M, NX, false>(&mut e, plan[k], k, schedule, &mut unused);
+        sample_all::<S, M, NX, false>(&mut e, plan[k], k, schedule, scales, &mut unused);
         k += 1;
     }
     let total = cost + terminal_cost::<S, M, NX>(&e);
@@ -294,13 +331,39 @@ pub fn rollout_with_jacobians<S: Spec<M, NX>, const M: usize, const NX: usize, c
     end: &mut [f64; NX],
     jac: &mut [StepJacobian<M>; K],
 ) -> f64 {
+    rollout_with_jacobians_scaled::<S, M, NX, K>(
+        e0,
+        plan,
+        schedule,
+        &nominal_scales(),
+        states,
+        end,
+        jac,
+    )
+}
+
+/// [`rollout_with_jacobians`] on the model with `scales` applied.
+pub fn rollout_with_jacobians_scaled<
+    S: Spec<M, NX>,
+    const M: usize,
+    const NX: usize,
+    const K: usize,
+>(
+    e0: &[f64; NX],
+    plan: &[f64; K],
+    schedule: &Schedule,
+    scales: &ModelScales<M>,
+    states: &mut [[f64; NX]; K],
+    end: &mut [f64; NX],
+    jac: &mut [StepJacobian<M>; K],
+) -> f64 {
     let mut e = *e0;
     let mut cost = 0.0;
     let mut k = 0;
     while k < K {
         states[k] = e;
         cost += stage_cost::<S, M, NX>(&e, plan[k]);
-        sample_all::<S, M, NX, true>(&mut e, plan[k], k, schedule, &mut jac[k]);
+        sample_all::<S, M, NX, true>(&mut e, plan[k], k, schedule, scales, &mut jac[k]);
         k += 1;
     }
     *end = e;
@@ -323,7 +386,14 @@ pub fn predict<S: Spec<M, NX>, const M: usize, const NX: usize, const K: usize>(
     let mut unused = StepJacobian::ZERO;
     let mut k = 0;
     while k < samples && k < K {
-        sample_all::<S, M, NX, false>(&mut e, plan[k], k, &Schedule::BACK_TO_BACK, &mut unused);
+        sample_all::<S, M, NX, false>(
+            &mut e,
+            plan[k],
+            k,
+            &Schedule::BACK_TO_BACK,
+            &nominal_scales(),
+            &mut unused,
+        );
         k += 1;
     }
     e
@@ -335,6 +405,17 @@ pub fn capsule_transition<S: Spec<M, NX>, const M: usize, const NX: usize>(
     xv: [f64; 2],
     u: f64,
     duration_s: f64,
+) -> ([f64; 2], [f64; 4]) {
+    capsule_transition_scaled::<S, M, NX>(i, xv, u, duration_s, [1.0, 1.0])
+}
+
+/// [`capsule_transition`] with the capsule's gain and drag scaled by `scale`.
+pub fn capsule_transition_scaled<S: Spec<M, NX>, const M: usize, const NX: usize>(
+    i: usize,
+    xv: [f64; 2],
+    u: f64,
+    duration_s: f64,
+    scale: [f64; 2],
 ) -> ([f64; 2], [f64; 4]) {
     let mut s = xv;
     let mut a = [1.0, 0.0, 0.0, 1.0];
@@ -349,7 +430,7 @@ pub fn capsule_transition<S: Spec<M, NX>, const M: usize, const NX: usize>(
     let h = duration_s / steps as f64;
     let mut n = 0;
     while n < steps {
-        let (next, sa, _) = rk4_capsule::<S, M, NX>(i, s[0], s[1], u, h);
+        let (next, sa, _) = rk4_capsule::<S, M, NX>(i, s[0], s[1], u, h, scale);
         a = mat2_mul(&sa, &a);
         s = next;
         n += 1;

@@ -199,6 +199,13 @@ pub const MODEL_DRIFT_SPEED_KEPT: f64 = 0.8;
 /// actuation phase (10 samples at u_max: 14 mm for a 10 % gain error), and
 /// tracking glitches beyond it stay recognized as such.
 pub const MODEL_DRIFT_MAX_M: f64 = 0.008;
+/// Step of the finite differences for the gain and drag factors'
+/// sensitivities.
+pub const SCALE_STEP: f64 = 1.0e-3;
+/// A factor is used once it differs from the model's 1 by this many
+/// standard deviations of its estimate (on the model itself, chance
+/// differences stay below it).
+pub const SCALE_SIGNIFICANCE: f64 = 3.0;
 /// Largest model uncertainty accepted (a factor of two).
 pub const MAX_MODEL_UNCERTAINTY: f64 = 1.0;
 /// Accepted frames after which an estimate counts as established (see

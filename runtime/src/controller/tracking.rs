@@ -173,7 +173,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                     self.replaced = self.filters;
                     self.has_replaced = true;
                 }
+                self.update_scales(z, r);
                 update_filters(&mut self.filters[..m], z, r);
+                self.refresh_applied_scales();
                 RuntimeStatus::Ok
             }
             Measurement::GatedOut => {
@@ -275,6 +277,41 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
     }
 
+    /// The gain and drag factors from an accepted frame `z` (before the
+    /// kinematic update, whose innovation they regress).
+    pub(super) fn update_scales(&mut self, z: &[f64], r: f64) {
+        for i in 0..NX / 2 {
+            let f = self.filters[i];
+            let s = f.cov[0] + r;
+            let innovation = z[i] - f.mean[0];
+            self.scales[i].update(innovation, s, self.applied_scales[i]);
+            self.scales[i].after_kinematic_update([f.cov[0] / s, f.cov[2] / s]);
+        }
+    }
+
+    /// Takes up the factors that differ significantly from the model
+    /// (`SCALE_SIGNIFICANCE` standard deviations): the estimate is moved
+    /// by what the change of factors implies, and the refinement rolls
+    /// out on them.
+    pub(super) fn refresh_applied_scales(&mut self) {
+        let mut changed = false;
+        for i in 0..NX / 2 {
+            let new = self.scales[i].significant(SCALE_SIGNIFICANCE);
+            let old = self.applied_scales[i];
+            if new != old {
+                let sens = self.scales[i].sens;
+                let d = [new[0] - old[0], new[1] - old[1]];
+                self.filters[i].mean[0] += sens[0] * d[0] + sens[1] * d[1];
+                self.filters[i].mean[1] += sens[2] * d[0] + sens[3] * d[1];
+                self.applied_scales[i] = new;
+                changed = true;
+            }
+        }
+        if changed {
+            self.solver.set_model_scales(&self.applied_scales[..NX / 2]);
+        }
+    }
+
     /// An accepted frame corrects the position drift at once and the speed
     /// drift over a few frames (`MODEL_DRIFT_SPEED_KEPT`).
     pub(super) fn settle_model_drift(&mut self) {
@@ -308,14 +345,32 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // A disturbance of bound gamma, read as white noise over one sample.
         let accel_psd = (gamma * gamma * S::DT_S).max(MIN_ACCEL_PSD);
         let vel_psd = gamma * gamma * S::DT_S;
+        let applied = self.applied_scales;
         let predict = |filters: &mut [CapsuleFilter]| {
             for (i, f) in filters.iter_mut().enumerate() {
-                let (next, a) = S::capsule_transition(i, f.mean, u, duration_s);
+                let (next, a) = S::capsule_transition_scaled(i, f.mean, u, duration_s, applied[i]);
                 f.predict(next, a, duration_s, accel_psd, vel_psd);
             }
         };
         let m = NX / 2;
         self.accumulate_model_drift(u, duration_s);
+        // The factors' sensitivities, by differences of the same step.
+        for i in 0..m {
+            let f = self.filters[i];
+            let s = applied[i];
+            let (base, a) = S::capsule_transition_scaled(i, f.mean, u, duration_s, s);
+            let (g, _) =
+                S::capsule_transition_scaled(i, f.mean, u, duration_s, [s[0] + SCALE_STEP, s[1]]);
+            let (d, _) =
+                S::capsule_transition_scaled(i, f.mean, u, duration_s, [s[0], s[1] + SCALE_STEP]);
+            let b = [
+                (g[0] - base[0]) / SCALE_STEP,
+                (d[0] - base[0]) / SCALE_STEP,
+                (g[1] - base[1]) / SCALE_STEP,
+                (d[1] - base[1]) / SCALE_STEP,
+            ];
+            self.scales[i].predict(a, b, duration_s);
+        }
         predict(&mut self.filters[..m]);
         if self.candidate_frames > 0 {
             predict(&mut self.candidate[..m]);
