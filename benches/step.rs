@@ -1,13 +1,15 @@
 //! criterion benches of the online step: the full controller step
-//! (`DefaultController::cycle_full_state`), the generated solver's `solve`,
+//! (`DefaultController::cycle_full_state`), the generated solver's `solve`
+//! (plain, and with the active-set engine in the bench's timing wrapper),
 //! and one window QP of the active-set engine. Each starts from the warm case
 //! of `capsule-mpc bench` (a first solve, `shift(1)`, the predicted next
 //! state), on states of scenario C's closed loop and one uniform state.
 
+use capsule_mpc::bench::engine::Timed;
 use capsule_mpc::bench::harness::prototype_controller;
-use capsule_mpc::bench::reference::{ActiveSetEngine, QpEngine, RefProblem, RefSolver};
-use capsule_mpc_generator::config::Config;
+use capsule_mpc::bench::peers::PeerSolver;
 use capsule_mpc_runtime::generated::controller::{spec, Solver};
+use capsule_mpc_runtime::solver::qp::{ActiveSet, QpEngine};
 use capsule_mpc_runtime::solver::PlanSolver;
 use criterion::{black_box, criterion_group, criterion_main, BatchSize, Criterion};
 
@@ -20,7 +22,6 @@ const STATES: [(&str, [f64; spec::NX]); 3] = [
 
 fn benches(c: &mut Criterion) {
     let proto = prototype_controller().expect("controller");
-    let problem = RefProblem::from_config(&Config::embedded_default()).expect("config");
     for (name, e) in STATES {
         // Warm case: first solve, then the next state after one sample.
         let mut warm_solver = Solver::new();
@@ -29,6 +30,12 @@ fn benches(c: &mut Criterion) {
         warm_solver.shift(1);
         let mut warm_ctl = proto.clone();
         warm_ctl.cycle_full_state(&e).expect("cycle");
+        // The same warm case in the solver with the wrapped engine (its
+        // cold solve goes to the active-set method while disarmed).
+        let mut wrapped = PeerSolver::with_engine(Timed::new(ActiveSet));
+        wrapped.solve(&e);
+        wrapped.shift(1);
+        wrapped.engine().arm();
 
         c.bench_function(&format!("controller_step/{name}"), |b| {
             b.iter_batched_ref(
@@ -44,16 +51,19 @@ fn benches(c: &mut Criterion) {
                 BatchSize::SmallInput,
             )
         });
-        // The first window QP of that warm step (re-built by the reference loop).
-        let mut rs = RefSolver::new();
-        let start = *warm_solver.plan();
-        let (plan, _) = RefSolver::start_plan(&problem, &e1, Some(&start)).expect("table");
-        rs.build_qp(&problem, &e1, &plan);
-        let qp = rs.qp;
-        let mut engine = ActiveSetEngine::default();
-        let mut x = [0.0; spec::N];
+        c.bench_function(&format!("solver_solve_timed_engine/{name}"), |b| {
+            b.iter_batched_ref(
+                || wrapped.clone(),
+                |s| s.solve(black_box(&e1)),
+                BatchSize::SmallInput,
+            )
+        });
+        // The last window QP of that warm step (`Solver::window_qp`).
+        let mut after = warm_solver.clone();
+        after.solve(&e1);
+        let mut qp = after.window_qp().clone();
         c.bench_function(&format!("qp_solve/{name}"), |b| {
-            b.iter(|| engine.solve(black_box(&qp), &mut x))
+            b.iter(|| ActiveSet.solve(black_box(&mut qp)))
         });
     }
 }

@@ -128,6 +128,13 @@ pub struct ScaleEstimate {
     pub sens: [f64; 4],
 }
 
+/// See `ScaleEstimate::update`, m.
+pub const SCALE_FRAME_STD_M: f64 = 3.0e-4;
+
+/// Frames whose innovation the factors' uncertainty does not explain
+/// (normalized innovation squared above this, 3 sigma) do not update them.
+pub const SCALE_UPDATE_NIS: f64 = 2.0;
+
 /// Random walk of the factors, per second (variance): they are constants
 /// of the capsule, but a slow drift (warming, a shell filling) is allowed.
 pub const SCALE_DRIFT_PER_S: f64 = 1.0e-5;
@@ -166,14 +173,22 @@ impl ScaleEstimate {
         let h = [self.sens[0], self.sens[1]];
         let p = self.cov;
         let ph = [p[0] * h[0] + p[1] * h[1], p[2] * h[0] + p[3] * h[1]];
-        let s = s_m2 + h[0] * ph[0] + h[1] * ph[1];
-        if !(s > 0.0) {
+        // Each frame counts as if measured to SCALE_FRAME_STD_M at best:
+        // the factors are learned over a move's many frames, so a few
+        // frames of a tracking glitch cannot set them.
+        let s = s_m2 + SCALE_FRAME_STD_M * SCALE_FRAME_STD_M + h[0] * ph[0] + h[1] * ph[1];
+        if s.is_nan() || s <= 0.0 {
             return [0.0, 0.0];
         }
         // The prediction used `used`, not the mean: what the mean predicts
         // on top of it is part of the expected innovation.
         let expected = h[0] * (self.mean[0] - used[0]) + h[1] * (self.mean[1] - used[1]);
         let r = innovation_m - expected;
+        if r * r / s > SCALE_UPDATE_NIS {
+            // Farther than the factors' own uncertainty explains: a
+            // tracking glitch or a disturbance, not the capsule's constants.
+            return [0.0, 0.0];
+        }
         let k = [ph[0] / s, ph[1] / s];
         let d = [k[0] * r, k[1] * r];
         self.mean[0] += d[0];

@@ -1,23 +1,20 @@
-//! clarabel as the QP engine of the reference loop.
+//! clarabel as the refinement's window-QP engine.
 
-use crate::bench::reference::{upper_triangle_csc, DenseQp, QpEngine};
-use capsule_mpc_runtime::generated::controller::spec::N;
+use crate::bench::engine::upper_triangle_csc;
+use capsule_mpc_runtime::solver::qp::{BoxQp, QpEngine};
 
 /// clarabel 0.11 (interior point; no warm start): a new solver per QP.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Copy, Default)]
 pub struct ClarabelEngine;
 
-impl QpEngine for ClarabelEngine {
-    fn name(&self) -> &'static str {
-        "clarabel"
-    }
-    fn solve(&mut self, qp: &DenseQp, x: &mut [f64; N]) -> (u32, bool) {
+impl<const N: usize> QpEngine<N> for ClarabelEngine {
+    fn solve(&mut self, qp: &mut BoxQp<N>) -> (u32, bool) {
         use clarabel::algebra::CscMatrix;
         use clarabel::solver::{
             DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
         };
         // Dense upper triangle of H; A = [I; -I], b = [hi; -lo].
-        let (colptr, rowval, nzval) = upper_triangle_csc(qp);
+        let (colptr, rowval, nzval) = upper_triangle_csc(&qp.h);
         let p = CscMatrix::new(N, N, colptr, rowval, nzval);
         let a = CscMatrix::new(
             2 * N,
@@ -38,7 +35,7 @@ impl QpEngine for ClarabelEngine {
             ..DefaultSettings::default()
         };
         let Ok(mut s) = DefaultSolver::new(&p, &qp.g, &a, &b, &cones, settings) else {
-            *x = [0.0; N];
+            qp.x = [0.0; N];
             return (0, false);
         };
         s.solve();
@@ -47,7 +44,7 @@ impl QpEngine for ClarabelEngine {
             SolverStatus::Solved | SolverStatus::AlmostSolved
         );
         for j in 0..N {
-            x[j] = if ok {
+            qp.x[j] = if ok {
                 s.solution.x[j].clamp(qp.lo[j], qp.hi[j])
             } else {
                 0.0

@@ -35,34 +35,45 @@
 //!
 //! # Peers
 //!
-//! The generated solver's window QP lives in private fields, so the peers run
-//! inside [`RefSolver`], a plain-Rust re-implementation of the template's
-//! refinement step (same table selection, same model through
-//! `capsule_mpc_generator::model::rk4_capsule` with the config's parameters,
-//! same weights through `OcpWeights::from_config`, same tail cost-to-go,
-//! condensing and line search) whose QP engine is pluggable: the generated
-//! active-set [`qp::BoxQp`] (the reference: it reproduces the generated
-//! solver's plan, which is checked), clarabel, and OSQP (feature
-//! `peers-osqp`). OpEn (PANOC) solves the nonlinear window problem itself:
-//! the N window inputs in the box, the nonlinear cost over the whole plan with
-//! the tail fixed, the exact gradient by the adjoint of the RK4 Jacobians.
-//! All peers start from the same state and plan as the warm step above.
+//! The peers run inside the generated solver itself: its refinement's
+//! window-QP engine is a type parameter (`capsule_mpc_solver::qp::QpEngine`),
+//! so each QP peer is an engine plugged into
+//! `capsule_mpc_solver::Solver::<Spec, M, NX, N, K, Timed<E>>::with_engine`
+//! and the timed call is that solver's own `solve` (same table selection,
+//! rollouts, tail cost-to-go, condensing and line search as the product).
+//! [`Timed`] wraps every engine alike, the reference row's active-set
+//! method ([`ActiveSet`]) included, and records each QP's time,
+//! iterations and convergence and the first QP's step: ratios compare like
+//! with like. The engines are the active-set method, clarabel and OSQP
+//! (feature `peers-osqp`). The cold solve that sets a warm case up goes to
+//! the active-set method for every engine, so all of them refine the same
+//! start plan from the same state; that the wrapped active-set solver
+//! reproduces the plain `Solver` bit for bit is checked (JSON
+//! `peers.reference_check`). OpEn (PANOC) solves the nonlinear window
+//! problem itself: the N window inputs in the box, the nonlinear cost over
+//! the whole plan with the tail fixed (the solver crate's rollout), the
+//! exact gradient by the adjoint of its RK4 Jacobians. All peers start
+//! from the same state and plan as the warm step above.
 //!
-//! [`RefSolver`]: reference::RefSolver
-//! [`qp::BoxQp`]: capsule_mpc_runtime::generated::controller::qp::BoxQp
+//! [`Timed`]: engine::Timed
+//! [`ActiveSet`]: capsule_mpc_runtime::solver::qp::ActiveSet
 //!
 //! # Layout
 //!
 //! [`states`] draws the states, [`timing`] holds the timer and percentiles,
 //! [`harness`] times the controller step and the solver and prints the
-//! tables, [`reference`](mod@reference) is the reference refinement loop
-//! with its active-set engine, [`peers`] runs the peers ([`clarabel_peer`],
-//! `osqp_peer` with feature `peers-osqp`, [`open_peer`]) on the warm case.
+//! tables, [`engine`] is the timing wrapper around a QP engine,
+//! [`peers`] runs the peers ([`clarabel_peer`], `osqp_peer` with feature
+//! `peers-osqp`, [`open_peer`]) on the warm case, [`tiers`] times the two
+//! tiers and the explicit QP against the peers, and
+//! [`reference`](mod@reference) checks the config against the generated
+//! spec.
 
 // Index loops mirror the math (S[k][j], H[a][b]), as in the template.
 #![allow(clippy::needless_range_loop)]
 
 pub mod clarabel_peer;
+pub mod engine;
 pub mod harness;
 pub mod open_peer;
 #[cfg(feature = "peers-osqp")]

@@ -1,7 +1,8 @@
-//! OSQP as the QP engine of the reference loop (feature `peers-osqp`).
+//! OSQP as the refinement's window-QP engine (feature `peers-osqp`).
 
-use crate::bench::reference::{upper_triangle_csc, DenseQp, QpEngine};
+use crate::bench::engine::upper_triangle_csc;
 use capsule_mpc_runtime::generated::controller::spec::N;
+use capsule_mpc_runtime::solver::qp::{BoxQp, QpEngine};
 
 /// OSQP 0.6 (ADMM): one workspace, `P`, `q` and the bounds updated per QP;
 /// OSQP's default warm start (from the previous QP's solution) is kept.
@@ -22,8 +23,8 @@ impl OsqpEngine {
             .polish(true)
     }
 
-    fn upper(qp: &DenseQp) -> osqp::CscMatrix<'static> {
-        let (indptr, indices, data) = upper_triangle_csc(qp);
+    fn upper(qp: &BoxQp<N>) -> osqp::CscMatrix<'static> {
+        let (indptr, indices, data) = upper_triangle_csc(&qp.h);
         osqp::CscMatrix {
             nrows: N,
             ncols: N,
@@ -34,11 +35,8 @@ impl OsqpEngine {
     }
 }
 
-impl QpEngine for OsqpEngine {
-    fn name(&self) -> &'static str {
-        "osqp"
-    }
-    fn solve(&mut self, qp: &DenseQp, x: &mut [f64; N]) -> (u32, bool) {
+impl QpEngine<N> for OsqpEngine {
+    fn solve(&mut self, qp: &mut BoxQp<N>) -> (u32, bool) {
         let p = Self::upper(qp);
         let problem = match &mut self.problem {
             Some(pr) => {
@@ -56,7 +54,7 @@ impl QpEngine for OsqpEngine {
                 match osqp::Problem::new(p, &qp.g, a, &qp.lo, &qp.hi, &Self::settings()) {
                     Ok(pr) => self.problem.insert(pr),
                     Err(_) => {
-                        *x = [0.0; N];
+                        qp.x = [0.0; N];
                         return (0, false);
                     }
                 }
@@ -67,12 +65,12 @@ impl QpEngine for OsqpEngine {
         match status {
             osqp::Status::Solved(s) | osqp::Status::SolvedInaccurate(s) => {
                 for j in 0..N {
-                    x[j] = s.x()[j].clamp(qp.lo[j], qp.hi[j]);
+                    qp.x[j] = s.x()[j].clamp(qp.lo[j], qp.hi[j]);
                 }
                 (iters, true)
             }
             _ => {
-                *x = [0.0; N];
+                qp.x = [0.0; N];
                 (iters, false)
             }
         }

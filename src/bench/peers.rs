@@ -1,18 +1,25 @@
-//! The peers on the warm case of the benchmark states: the reference loop
-//! with each QP engine, and OpEn on the window problem; their statistics.
+//! The peers on the warm case of the benchmark states: the generated
+//! solver with each QP engine (wrapped in [`Timed`]), and OpEn on the
+//! window problem; their statistics.
 
 use crate::bench::clarabel_peer::ClarabelEngine;
+use crate::bench::engine::{QpCall, Timed};
 use crate::bench::open_peer::OpenPeer;
 #[cfg(feature = "peers-osqp")]
 use crate::bench::osqp_peer::OsqpEngine;
-use crate::bench::reference::{ActiveSetEngine, QpEngine, RefProblem, RefSolver};
+use crate::bench::reference::RefProblem;
 use crate::bench::states::BenchState;
 use crate::bench::timing::{fmt_us, timed, Percentiles};
-use capsule_mpc_runtime::generated::controller::{spec, Solver};
+use capsule_mpc_runtime::generated::controller::{spec, Solver, Spec};
 use capsule_mpc_runtime::generated::{SolveReport, SolveStatus};
+use capsule_mpc_runtime::solver::qp::{ActiveSet, QpEngine};
 use capsule_mpc_runtime::solver::PlanSolver;
 use serde_json::{json, Value};
-use spec::{K, NX};
+use spec::{K, M, N, NX};
+use std::hint::black_box;
+
+/// The generated module's solver with the QP engine `E`, timed.
+pub type PeerSolver<E> = capsule_mpc_runtime::solver::Solver<Spec, M, NX, N, K, Timed<E>>;
 
 /// The warm case of one state, for the peers: the predicted next state, the
 /// plan the warm solve starts from (the cold plan shifted by one; None when
@@ -40,6 +47,93 @@ impl WarmCase {
             report,
         }
     }
+}
+
+/// One engine's warm step: what `Solver::solve` returned, its time and
+/// the engine's record of the QPs.
+#[derive(Debug, Clone)]
+pub struct WarmRun {
+    pub e1: [f64; NX],
+    pub plan: [f64; K],
+    pub report: SolveReport,
+    pub step_ns: u64,
+    pub calls: Vec<QpCall>,
+    /// The first QP's step on the first input (the same QP for every engine).
+    pub first_du0: Option<f64>,
+}
+
+/// A [`PeerSolver`] behind a name, so that engines of different types run
+/// side by side.
+pub trait WarmPeer {
+    fn name(&self) -> &'static str;
+    /// The warm case from `e` as [`WarmCase::new`] builds it, the cold
+    /// solve with the active-set method and the timed warm solve with this
+    /// peer's engine.
+    fn warm_step(&mut self, e: &[f64; NX]) -> WarmRun;
+}
+
+/// `E` in the generated solver, one solver reused over the states (reset
+/// before each), so that an engine with a workspace (OSQP) keeps it.
+pub struct EnginePeer<E> {
+    name: &'static str,
+    solver: Box<PeerSolver<E>>,
+}
+
+impl<E: QpEngine<N>> EnginePeer<E> {
+    pub fn new(name: &'static str, engine: E) -> EnginePeer<E> {
+        EnginePeer {
+            name,
+            solver: Box::new(PeerSolver::with_engine(Timed::new(engine))),
+        }
+    }
+}
+
+impl<E: QpEngine<N>> WarmPeer for EnginePeer<E> {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn warm_step(&mut self, e: &[f64; NX]) -> WarmRun {
+        let s = &mut *self.solver;
+        s.reset();
+        s.engine().disarm();
+        s.solve(e);
+        let e1 = Solver::predict_plan(e, s.plan(), 1);
+        s.shift(1);
+        s.engine().arm();
+        let (report, step_ns) = timed(|| black_box(&mut *s).solve(black_box(&e1)));
+        s.engine().disarm();
+        WarmRun {
+            e1,
+            plan: *s.plan(),
+            report,
+            step_ns,
+            calls: s.engine().calls().to_vec(),
+            first_du0: s.engine().first_step(),
+        }
+    }
+}
+
+/// The engines timed in the generated solver: the active-set method first
+/// (the reference of the ratios), then clarabel and, with feature
+/// `peers-osqp`, OSQP.
+pub fn engine_peers() -> Vec<Box<dyn WarmPeer>> {
+    vec![
+        Box::new(EnginePeer::new("active-set", ActiveSet)),
+        Box::new(EnginePeer::new("clarabel", ClarabelEngine)),
+        #[cfg(feature = "peers-osqp")]
+        Box::new(EnginePeer::new("osqp", OsqpEngine::default())),
+    ]
+}
+
+/// Whether a run reproduces the plain solver's warm case bit for bit
+/// (predicted state, plan, cost and status).
+pub fn same_bits(run: &WarmRun, case: &WarmCase) -> bool {
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    bits(&run.e1) == bits(&case.e1)
+        && bits(&run.plan) == bits(&case.plan)
+        && run.report.cost.to_bits() == case.report.cost.to_bits()
+        && run.report.status == case.report.status
 }
 
 /// Figures of one peer over the peer states.
@@ -82,27 +176,35 @@ impl PeerStats {
             "states": self.step_ns.len(),
         })
     }
+
+    fn cost_gap(&mut self, cost: f64, case: &WarmCase) {
+        let c = case.report.cost;
+        self.cost_gap.push((cost - c) / c.abs().max(1e-12));
+    }
+}
+
+/// The active-set row against the plain generated solver.
+#[derive(Debug, Default)]
+struct Check {
+    compared: u64,
+    differing: u64,
+    max_abs_u0: f64,
+    max_rel_cost: f64,
 }
 
 /// Runs every peer on `count` of the states (evenly spread); prints their
-/// table and returns their JSON.
+/// table and returns their JSON. `problem` (the config's constants) only
+/// enters the check's report.
 pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usize) -> Value {
     if count == 0 {
         return json!({});
     }
     let picks: Vec<usize> = (0..count).map(|i| i * states.len() / count).collect();
-    let mut engines: Vec<Box<dyn QpEngine>> = vec![
-        Box::new(ActiveSetEngine::default()),
-        Box::new(ClarabelEngine),
-    ];
-    #[cfg(feature = "peers-osqp")]
-    engines.push(Box::new(OsqpEngine::default()));
+    let mut engines = engine_peers();
     let mut stats: Vec<PeerStats> = engines.iter().map(|_| PeerStats::default()).collect();
     let mut open_stats = PeerStats::default();
     let mut open = OpenPeer::new();
-    let mut rs = RefSolver::new();
-    let mut ref_vs_generated_u0: f64 = 0.0;
-    let mut ref_vs_generated_cost: f64 = 0.0;
+    let mut check = Check::default();
     eprintln!(
         "bench: peers ({}, open) on {count} of the states",
         engines
@@ -114,33 +216,41 @@ pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usiz
     let warmup = 20.min(count);
     for (n, &i) in picks.iter().enumerate() {
         let t = WarmCase::new(&states[i].e);
-        let e1 = &t.e1;
-        let start = t.start.as_ref();
         let mut first_du0_ref = 0.0;
         for (k, engine) in engines.iter_mut().enumerate() {
-            let (out, ns) = timed(|| rs.refine(problem, engine.as_mut(), e1, start));
-            let Some(out) = out else { continue };
-            if n < warmup {
+            let run = engine.warm_step(&states[i].e);
+            if k == 0 {
+                check.compared += 1;
+                if !same_bits(&run, &t) {
+                    check.differing += 1;
+                }
+                check.max_abs_u0 = check.max_abs_u0.max((run.plan[0] - t.plan[0]).abs());
+                let c = t.report.cost;
+                if run.report.cost != c {
+                    check.max_rel_cost = check
+                        .max_rel_cost
+                        .max((run.report.cost - c).abs() / c.abs().max(1e-12));
+                }
+                first_du0_ref = run.first_du0.unwrap_or(0.0);
+            }
+            if n < warmup || run.report.status == SolveStatus::OutOfRange {
                 continue;
             }
             let st = &mut stats[k];
-            st.step_ns.push(ns);
-            st.qp_ns.extend_from_slice(&out.qp_ns);
-            st.max_iterations = st.max_iterations.max(out.max_qp_iterations);
-            st.failures += out.qp_failures as u64;
-            if k == 0 {
-                first_du0_ref = out.first_du0;
-                ref_vs_generated_u0 = ref_vs_generated_u0.max((out.plan[0] - t.plan[0]).abs());
-                let c = t.report.cost;
-                ref_vs_generated_cost =
-                    ref_vs_generated_cost.max((out.cost - c).abs() / c.abs().max(1e-12));
+            st.step_ns.push(run.step_ns);
+            st.qp_ns.extend(run.calls.iter().map(|c| c.ns));
+            for c in &run.calls {
+                st.max_iterations = st.max_iterations.max(c.iterations);
+                if !c.converged {
+                    st.failures += 1;
+                }
             }
-            st.max_abs_du = st.max_abs_du.max((out.first_du0 - first_du0_ref).abs());
-            st.max_abs_u0 = st.max_abs_u0.max((out.plan[0] - t.plan[0]).abs());
-            st.cost_gap
-                .push((out.cost - t.report.cost) / t.report.cost.abs().max(1e-12));
+            let du0 = run.first_du0.unwrap_or(0.0);
+            st.max_abs_du = st.max_abs_du.max((du0 - first_du0_ref).abs());
+            st.max_abs_u0 = st.max_abs_u0.max((run.plan[0] - t.plan[0]).abs());
+            st.cost_gap(run.report.cost, &t);
         }
-        let (out, ns) = timed(|| open.refine(problem, e1, start));
+        let (out, ns) = timed(|| open.refine(&t.e1, t.start.as_ref()));
         if n < warmup {
             continue;
         }
@@ -153,9 +263,7 @@ pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usiz
                 }
                 open_stats.max_abs_u0 = open_stats.max_abs_u0.max((plan[0] - t.plan[0]).abs());
                 open_stats.max_abs_du = open_stats.max_abs_u0;
-                open_stats
-                    .cost_gap
-                    .push((cost - t.report.cost) / t.report.cost.abs().max(1e-12));
+                open_stats.cost_gap(cost, &t);
             }
             None => open_stats.failures += 1,
         }
@@ -164,7 +272,7 @@ pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usiz
     let ours_qp = Percentiles::of(&stats[0].qp_ns).median;
     let mut out = serde_json::Map::new();
     println!(
-        "peers on {} states (warm step, same state and start plan; times per refinement step = table check + {} SQP iterations; ratios vs the active-set engine in the same reference loop):",
+        "peers on {} states (warm step, same state and start plan; times per Solver::solve = table check + {} SQP iterations of the generated solver, each engine wrapped alike; ratios vs the active-set engine):",
         stats[0].step_ns.len(),
         spec::SQP_ITERATIONS
     );
@@ -195,15 +303,28 @@ pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usiz
         "osqp".to_string(),
         json!({"skipped": "build with --features peers-osqp (needs cmake)"}),
     );
+    let identical = check.differing == 0;
     println!(
-        "reference loop (active-set) vs the generated solver: max |u0| difference {ref_vs_generated_u0:.3e} T/m, max relative cost difference {ref_vs_generated_cost:.3e}"
+        "active-set engine (wrapped) vs the plain generated solver: {} of {} warm steps bit for bit identical (max |u0| difference {:.3e} T/m, max relative cost difference {:.3e})",
+        check.compared - check.differing,
+        check.compared,
+        check.max_abs_u0,
+        check.max_rel_cost
     );
     println!(
         "|du0|: first QP's step on u0 vs the active-set engine's (identical QP data); |u0|: first input after the step vs the generated solver's; open: no QP, |du0| = |u0|"
     );
     out.insert(
         "reference_check".to_string(),
-        json!({"max_abs_u0_vs_generated": ref_vs_generated_u0, "max_rel_cost_vs_generated": ref_vs_generated_cost}),
+        json!({
+            "plans_bit_identical": identical,
+            "states_compared": check.compared,
+            "states_differing": check.differing,
+            "max_abs_u0_vs_generated": check.max_abs_u0,
+            "max_rel_cost_vs_generated": check.max_rel_cost,
+            "config_vs_spec_max_rel": problem.spec_mismatch(),
+            "what": "the generated solver with the wrapped active-set engine (the peers' reference row) against the plain Solver on the same warm cases: predicted state, plan, cost and status compared bit for bit",
+        }),
     );
     Value::Object(out)
 }
@@ -227,4 +348,48 @@ fn print_peer(name: &str, j: &Value) {
         j["max_abs_u0"].as_f64().unwrap_or(0.0),
         j["max_iterations"]
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// States at rest, moving, near the target and out of range.
+    const STATES: [[f64; NX]; 6] = [
+        [0.02, 0.0, -0.01, 0.0],
+        [-0.03, 0.1, 0.02, -0.2],
+        [-0.012, 0.12, 0.006, 0.05],
+        [0.031, -0.21, -0.044, 0.17],
+        [0.0005, 0.0, -0.0003, 0.0],
+        [0.5, 0.0, -0.5, 0.0],
+    ];
+
+    #[test]
+    fn wrapped_active_set_reproduces_the_plain_solver_bit_for_bit() {
+        let mut peer = EnginePeer::new("active-set", ActiveSet);
+        // Twice over: the reused, reset solver is a fresh one.
+        for e in STATES.iter().chain(&STATES) {
+            let case = WarmCase::new(e);
+            let run = peer.warm_step(e);
+            assert!(same_bits(&run, &case), "{e:?}: {run:?} vs {case:?}");
+            if run.report.status != SolveStatus::OutOfRange {
+                assert_eq!(run.calls.len(), spec::SQP_ITERATIONS, "{e:?}");
+                assert!(run.first_du0.is_some());
+            }
+        }
+    }
+
+    #[test]
+    fn clarabel_in_the_solver_starts_from_the_same_qp() {
+        let mut ours = EnginePeer::new("active-set", ActiveSet);
+        let mut clarabel = EnginePeer::new("clarabel", ClarabelEngine);
+        for e in &STATES[..4] {
+            let (a, c) = (ours.warm_step(e), clarabel.warm_step(e));
+            assert_eq!(a.e1, c.e1);
+            assert_eq!(c.calls.len(), spec::SQP_ITERATIONS);
+            let (da, dc) = (a.first_du0.unwrap(), c.first_du0.unwrap());
+            assert!((da - dc).abs() < 1e-2, "{e:?}: {da} vs {dc}");
+            assert!((a.plan[0] - c.plan[0]).abs() < 1e-2, "{e:?}");
+        }
+    }
 }

@@ -17,14 +17,13 @@
 use crate::bench::clarabel_peer::ClarabelEngine;
 #[cfg(feature = "peers-osqp")]
 use crate::bench::osqp_peer::OsqpEngine;
-use crate::bench::reference::{DenseQp, QpEngine};
 use crate::bench::states::BenchState;
 use crate::bench::timing::{fmt_us, timed, Percentiles};
 use capsule_mpc_runtime::generated::controller::{spec, Solver, TABLES};
 use capsule_mpc_runtime::generated::SolveStatus;
 use capsule_mpc_runtime::solver::explicit::{self, explicit_step_ops, ExplicitSample};
 use capsule_mpc_runtime::solver::format::Section;
-use capsule_mpc_runtime::solver::qp::BoxQp;
+use capsule_mpc_runtime::solver::qp::{BoxQp, QpEngine};
 use capsule_mpc_runtime::solver::PlanSolver;
 use serde_json::{json, Value};
 use spec::{K, N, NX};
@@ -147,14 +146,15 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
     })
 }
 
-/// The explicit tier's box QP (the same H, gradient and box it solves)
-/// through clarabel (and OSQP with `peers-osqp`), timed against the
-/// generated active-set QP warm-started from the stored active set; the
-/// ratio is peer / ours at the median, with the largest input difference.
+/// The explicit tier's box QP (the same H, gradient and box it solves,
+/// as `explicit::explicit_plan` loads it) through clarabel (and OSQP with
+/// `peers-osqp`) as `QpEngine`s, timed against the generated active-set QP
+/// warm-started from the stored active set; the ratio is peer / ours at
+/// the median, with the largest input difference.
 fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
     let count = peer_count.min(starts.len());
     let stride = (starts.len() / count.max(1)).max(1);
-    let mut cases: Vec<(DenseQp, usize)> = Vec::new();
+    let mut cases: Vec<(BoxQp<N>, usize)> = Vec::new();
     let mut qp = BoxQp::<{ spec::N }>::new(spec::QP_MAX_ITERATIONS, spec::QP_MULTIPLIER_TOLERANCE);
     let mut plan = [0.0; K];
     for (_, e1) in starts.iter().step_by(stride).take(count) {
@@ -175,29 +175,16 @@ fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
         {
             continue;
         }
-        cases.push((
-            DenseQp {
-                h: qp.h,
-                g: qp.g,
-                lo: qp.lo,
-                hi: qp.hi,
-            },
-            slot,
-        ));
+        cases.push((qp.clone(), slot));
     }
     let mut ours_ns = Vec::new();
     let mut ours_x = Vec::new();
     for (case, slot) in &cases {
         let mut best = u64::MAX;
         let mut x = [0.0; N];
+        let active = ExplicitSample::get(&TABLES, *slot).map_or([0; N], |s| s.active::<N>());
         for _ in 0..REPEATS {
-            let mut q =
-                BoxQp::<{ spec::N }>::new(spec::QP_MAX_ITERATIONS, spec::QP_MULTIPLIER_TOLERANCE);
-            q.h = case.h;
-            q.g = case.g;
-            q.lo = case.lo;
-            q.hi = case.hi;
-            let active = ExplicitSample::get(&TABLES, *slot).map_or([0; N], |s| s.active::<N>());
+            let mut q = case.clone();
             let (_, t) = timed(|| black_box(&mut q).solve_from(black_box(&active)));
             best = best.min(t);
             x = q.x;
@@ -206,37 +193,37 @@ fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
         ours_x.push(x);
     }
     let ours = Percentiles::of(&ours_ns);
-    let engines: Vec<Box<dyn QpEngine>> = vec![
-        Box::new(ClarabelEngine),
+    let engines: Vec<(&str, Box<dyn QpEngine<N>>)> = vec![
+        ("clarabel", Box::new(ClarabelEngine)),
         #[cfg(feature = "peers-osqp")]
-        Box::new(OsqpEngine::default()),
+        ("osqp", Box::new(OsqpEngine::default())),
     ];
     let mut out = serde_json::Map::new();
     out.insert(
         "explicit_qp_ns".into(),
         json!({"median": ours.median, "p99": ours.p99, "max": ours.max, "qps": cases.len()}),
     );
-    for mut engine in engines {
+    for (name, mut engine) in engines {
         let mut ns = Vec::new();
         let mut max_dx: f64 = 0.0;
         for ((case, _), x_ours) in cases.iter().zip(&ours_x) {
-            let mut x = [0.0; N];
-            let (_, t) = timed(|| engine.solve(case, &mut x));
+            let mut q = case.clone();
+            q.x = [0.0; N];
+            let (_, t) = timed(|| engine.solve(black_box(&mut q)));
             ns.push(t);
             for j in 0..N {
-                max_dx = max_dx.max((x[j] - x_ours[j]).abs());
+                max_dx = max_dx.max((q.x[j] - x_ours[j]).abs());
             }
         }
         let p = Percentiles::of(&ns);
         let ratio = p.median as f64 / ours.median.max(1) as f64;
         println!(
-            "  explicit QP: ours {} median, {} {} median ({ratio:.1}x), largest input difference {max_dx:.1e} T/m",
+            "  explicit QP: ours {} median, {name} {} median ({ratio:.1}x), largest input difference {max_dx:.1e} T/m",
             fmt_us(ours.median),
-            engine.name(),
             fmt_us(p.median)
         );
         out.insert(
-            engine.name().into(),
+            name.into(),
             json!({"median_ns": p.median, "max_ns": p.max, "ratio_to_ours": ratio, "max_abs_du_t_per_m": max_dx}),
         );
     }

@@ -198,7 +198,7 @@ pub const MODEL_DRIFT_SPEED_KEPT: f64 = 0.8;
 /// of the model drifts a few mm from the prediction over the longest
 /// actuation phase (10 samples at u_max: 14 mm for a 10 % gain error), and
 /// tracking glitches beyond it stay recognized as such.
-pub const MODEL_DRIFT_MAX_M: f64 = 0.008;
+pub const MODEL_DRIFT_MAX_M: f64 = 0.004;
 /// Step of the finite differences for the gain and drag factors'
 /// sensitivities.
 pub const SCALE_STEP: f64 = 1.0e-3;

@@ -280,10 +280,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// The gain and drag factors from an accepted frame `z` (before the
     /// kinematic update, whose innovation they regress).
     pub(super) fn update_scales(&mut self, z: &[f64], r: f64) {
-        for i in 0..NX / 2 {
+        for (i, &zi) in z.iter().enumerate().take(NX / 2) {
             let f = self.filters[i];
             let s = f.cov[0] + r;
-            let innovation = z[i] - f.mean[0];
+            let innovation = zi - f.mean[0];
             self.scales[i].update(innovation, s, self.applied_scales[i]);
             self.scales[i].after_kinematic_update([f.cov[0] / s, f.cov[2] / s]);
         }
@@ -355,9 +355,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let m = NX / 2;
         self.accumulate_model_drift(u, duration_s);
         // The factors' sensitivities, by differences of the same step.
-        for i in 0..m {
+        for (i, &s) in applied.iter().enumerate().take(m) {
             let f = self.filters[i];
-            let s = applied[i];
             let (base, a) = S::capsule_transition_scaled(i, f.mean, u, duration_s, s);
             let (g, _) =
                 S::capsule_transition_scaled(i, f.mean, u, duration_s, [s[0] + SCALE_STEP, s[1]]);
