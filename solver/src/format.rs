@@ -81,11 +81,11 @@ pub enum Section {
     Axes = 1,
     /// Scalars (see `SCALAR_*`).
     Scalars = 2,
-    /// Gradients of the back-to-back plans, f64 [P][K], T/m.
+    /// Gradients of the back-to-back plans, `f64 [P][K]`, T/m.
     PlanU = 3,
-    /// Whether each plan reaches its target, u8 [P].
+    /// Whether each plan reaches its target, `u8 [P]`.
     PlanReached = 4,
-    /// Minimum rest-to-rest time into the settle band, f64 [P], s
+    /// Minimum rest-to-rest time into the settle band, `f64 [P]`, s
     /// (infinite where not reached).
     PlanMinTime = 5,
     /// The same three for constant sampling's plans (a coast after each sample).
@@ -93,23 +93,23 @@ pub enum Section {
     CoastedPlanReached = 7,
     CoastedPlanMinTime = 8,
     /// Kept cells of the sparse warm-start index, ascending row-major
-    /// numbers over (e1, v1, e2, v2, ...), u64 [C].
+    /// numbers over (e1, v1, e2, v2, ...), `u64 [C]`.
     IndexCells = 9,
-    /// Per kept cell: plan << 16 | step offset, u32 [C] (and constant sampling's).
+    /// Per kept cell: plan << 16 | step offset, `u32 [C]` (and constant sampling's).
     Index = 10,
     CoastedIndex = 11,
-    /// Fine end-game plans from rest, f64 [F][K] (back to back, coasted).
+    /// Fine end-game plans from rest, `f64 [F][K]` (back to back, coasted).
     FinePlanU = 12,
     CoastedFinePlanU = 13,
-    /// Whether both fine plans of a grid point move, u8 [F].
+    /// Whether both fine plans of a grid point move, `u8 [F]`.
     FineReached = 14,
-    /// Per leg lattice displacement: the first leg's plan (u16 [L]) and the
-    /// chain's summed minimum time (f64 [L], s).
+    /// Per leg lattice displacement: the first leg's plan (`u16 [L]`) and the
+    /// chain's summed minimum time (`f64 [L]`, s).
     FirstLeg = 15,
     ChainTime = 16,
     /// The explicit tier: one record per stored sample (see `ExplicitLayout`).
     ExplicitSamples = 17,
-    /// Every sample's relative state, f64 [E][NX].
+    /// Every sample's relative state, `f64 [E][NX]`.
     ExplicitState = 18,
     /// Per kept index cell / fine point: the slot of its sample, u16.
     ExplicitIndexSlot = 19,
@@ -117,7 +117,7 @@ pub enum Section {
     FineExplicitSlot = 21,
     CoastedFineExplicitSlot = 22,
     /// Generator-only data (re-emission without re-solving): plan states
-    /// f64 [P][K+1][NX], per-plan (cost f64, SQP iterations u32, arrival
+    /// `f64 [P][K+1][NX]`, per-plan (cost f64, SQP iterations u32, arrival
     /// samples u32), and the generator's version string.
     PlanStates = 23,
     PlanMeta = 24,
@@ -223,9 +223,9 @@ impl Section {
 pub const PLAN_META_BYTES: usize = 16;
 
 /// Layout of one explicit sample record for window `n` and `nx` states:
-/// f64 fields first (hessian upper triangle, gradient, sensitivity [n][nx],
-/// cost, cost gradient [nx], cost Hessian [nx][nx]), then source u8, plan
-/// u16, offset u16, next u16, active i8 [n], zero padding to 8 bytes.
+/// f64 fields first (hessian upper triangle, gradient, sensitivity `[n][nx]`,
+/// cost, cost gradient `[nx]`, cost Hessian `[nx][nx]`), then source u8, plan
+/// u16, offset u16, next u16, active `i8 [n]`, zero padding to 8 bytes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ExplicitLayout {
     pub n: usize,

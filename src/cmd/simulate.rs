@@ -55,7 +55,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     });
     let m = &report.metrics;
     println!(
-        "scenario {} ({} sampling, {:?} preset, disturbance {}, seed {}): settle {}{} | in band {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
+        "scenario {} ({} sampling, {:?} preset, disturbance {}, seed {}): settle {}{}{} | in band {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
         args.scenario_name(),
         sampling.name(),
         preset,
@@ -66,6 +66,10 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             " (min-time bound {b:.3} s{})",
             m.settle_over_bound.map_or(String::new(), |r| format!(", ratio {r:.2}"))
         )),
+        match m.settle_held_s {
+            Some(h) if Some(h) != m.settle_time_s => format!(" (held 1 s from {h:.3} s)"),
+            _ => String::new(),
+        },
         match (m.first_in_band_s, m.time_in_band_after_entry) {
             (Some(t), Some(f)) => format!("{:.1} % from {t:.3} s", 100.0 * f),
             _ => "never".to_string(),

@@ -208,6 +208,7 @@ mod tests {
                 max_step_compute_ns: 0,
                 min_time_bound_s: None,
                 settle_over_bound: None,
+                held_settle_over_bound: None,
                 workspace_excursion_m: 0.0,
                 settle_held_s: None,
                 first_in_band_s: None,
