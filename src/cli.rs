@@ -34,6 +34,76 @@ pub enum Command {
     Figures(FiguresArgs),
     /// Run the closed loop to every target of a grid: the reach map.
     Reach(ReachArgs),
+    /// Fit each capsule's gain and drag to a tracking log (or, with
+    /// --design, write the excitation that identifies them).
+    Calibrate(CalibrateArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct CalibrateArgs {
+    /// Tracking log: CSV `t_s,gradient_t_per_m,x1_m,...` (docs/calibrate.md)
+    /// or the run JSON of `simulate --json`.
+    #[arg(
+        long,
+        value_name = "FILE",
+        required_unless_present = "design",
+        conflicts_with = "design"
+    )]
+    pub log: Option<PathBuf>,
+    /// Base config (TOML); the embedded paper config when absent.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Write the base config with the fitted gain and drag of every
+    /// capsule as overrides (`generate --config` takes it as it is).
+    #[arg(long, value_name = "FITTED.toml")]
+    pub out: Option<PathBuf>,
+    /// Write the fit (SI, with standard errors, 95 % intervals, residuals
+    /// and warnings) as JSON here.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Draw the measured positions against the fitted model (calibration.svg/.png) here.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// With --design: play the excitation on the plant simulator (the
+    /// config's capsules, off the model by --plant-drag-scale and
+    /// --plant-gain-scale, the config's tracking noise) and write the
+    /// measured positions into the CSV: a log to try `calibrate` on.
+    #[arg(long, requires = "design")]
+    pub play: bool,
+    /// The simulated plant's drag and gain as factors of the model's (with --play).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "S1,S2,...",
+        requires = "play"
+    )]
+    pub plant_drag_scale: Option<Vec<f64>>,
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "S1,S2,...",
+        requires = "play"
+    )]
+    pub plant_gain_scale: Option<Vec<f64>>,
+    /// Seed of the simulated tracking noise (with --play).
+    #[arg(long, default_value_t = 1, requires = "play")]
+    pub seed: u64,
+    /// Fewest measurements a capsule must have in the log.
+    #[arg(long, default_value_t = 20, value_name = "N")]
+    pub min_measurements: usize,
+    /// Design an excitation instead of fitting.
+    #[arg(long)]
+    pub design: bool,
+    /// Length of the designed excitation, s.
+    #[arg(long, default_value_t = 10.0, value_parser = positive_seconds, requires = "design")]
+    pub duration: f64,
+    /// Write the designed excitation as a log CSV (positions empty: the
+    /// scanner measures them).
+    #[arg(long, value_name = "FILE", requires = "design")]
+    pub csv: Option<PathBuf>,
+    /// Write the designed excitation as a Pulseq sequence.
+    #[arg(long, value_name = "FILE.seq", requires = "design")]
+    pub pulseq: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -46,6 +46,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench(args) => cmd::bench::run(&args)?,
         Command::Figures(args) => cmd::figures::run(&args)?,
         Command::Reach(args) => cmd::reach::run(&args)?,
+        Command::Calibrate(args) => cmd::calibrate::run(&args)?,
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -664,8 +664,9 @@ const CRATE_LAYERS: &[(&str, &str, u8)] = &[
     ("runtime/Cargo.toml", "capsule-mpc-runtime", 2),
     ("capi/Cargo.toml", "capsule-mpc-capi", 3),
     ("sim/Cargo.toml", "capsule-mpc-sim", 3),
-    ("Cargo.toml", "capsule-mpc", 4),
-    ("fuzz/Cargo.toml", "capsule-mpc-fuzz", 5),
+    ("calibrate/Cargo.toml", "capsule-mpc-calibrate", 4),
+    ("Cargo.toml", "capsule-mpc", 5),
+    ("fuzz/Cargo.toml", "capsule-mpc-fuzz", 6),
 ];
 
 fn dependency_names(manifest: &toml::Value) -> Vec<(String, String)> {

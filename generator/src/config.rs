@@ -96,6 +96,17 @@ pub struct CapsuleConfig {
     /// Mass of the shell and payload, added to the sphere's mass, kg.
     #[serde(default)]
     pub shell_mass_kg: f64,
+    /// Measured magnetic acceleration per gradient, m/s^2 per T/m: when
+    /// given (`capsule-mpc calibrate --out` writes it), it overrides the
+    /// value derived from the sphere, its magnetization and the masses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain_m_per_s2_per_t_per_m: Option<f64>,
+    /// Measured drag coefficient of the configured law, 1/m (the quadratic
+    /// law's b in a = -b v|v|; the sphere correlation's k in
+    /// a = -k C_d(Re) v|v|): when given, it overrides the value derived
+    /// from the fluid, the capsule's area and the masses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drag_per_m: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -101,15 +101,18 @@ impl Model {
                 let diameter_m = 2.0 * c.capsule_radius_m;
                 let drag = match config.drag.law {
                     DragLaw::Quadratic => Drag::Quadratic {
-                        b_per_m: k_per_m * config.drag.drag_coefficient,
+                        b_per_m: c
+                            .drag_per_m
+                            .unwrap_or(k_per_m * config.drag.drag_coefficient),
                     },
                     DragLaw::SphereCorrelation => Drag::SphereCorrelation {
-                        k_per_m,
+                        k_per_m: c.drag_per_m.unwrap_or(k_per_m),
                         re_per_speed_s_per_m: rho * diameter_m / mu,
                     },
                 };
                 CapsuleParams {
-                    g: volume_m3 * c.saturation_magnetization_a_per_m / mass_kg,
+                    g: c.gain_m_per_s2_per_t_per_m
+                        .unwrap_or(volume_m3 * c.saturation_magnetization_a_per_m / mass_kg),
                     drag,
                     mass_kg,
                     diameter_m,

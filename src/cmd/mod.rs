@@ -2,6 +2,7 @@
 //! ([`crate::cli`]) to calls into the libraries and prints the result.
 
 pub mod bench;
+pub mod calibrate;
 pub mod figures;
 pub mod generate;
 pub mod inspect;

@@ -15,6 +15,8 @@ pub(super) enum Stroke {
     Dashed,
     /// A vertical stem from 0 to each point, with a dot on top.
     Stems,
+    /// A small dot at each point (measurements).
+    Dots,
 }
 
 #[derive(Debug, Clone)]

@@ -12,6 +12,7 @@
 //! (`simulate --plot`), [`paper`] the report's figures 3-8 and [`summary`]
 //! the numbers written beside them.
 
+pub mod calibration;
 mod figure;
 pub mod heatmap;
 pub mod paper;

@@ -212,6 +212,13 @@ fn draw_series<DB: DrawingBackend>(area: &Area<DB>, s: &Series) -> Result<()> {
             }
             Ok(())
         }
+        Stroke::Dots => {
+            for &(x, y) in &s.points {
+                area.draw(&Circle::new((x, y), 2, s.color.filled()))
+                    .map_err(plot_err)?;
+            }
+            Ok(())
+        }
     }
 }
 
@@ -234,7 +241,7 @@ fn add_legend<DB: DrawingBackend>(
             // dash longer than the 22 px sample.
             let (dash, gap) = match stroke {
                 Stroke::Dashed => (5, 3),
-                Stroke::Solid | Stroke::Stems => (30, 1),
+                Stroke::Solid | Stroke::Stems | Stroke::Dots => (30, 1),
             };
             let style = ShapeStyle::from(&color).stroke_width(width.max(2));
             DashedPathElement::new(vec![(x, y), (x + 22, y)], dash, gap, style)

@@ -42,6 +42,12 @@ impl Config {
                 1e7,
             )?;
             check_range(&f("shell_mass_kg"), c.shell_mass_kg, 0.0, false, 1.0)?;
+            if let Some(g) = c.gain_m_per_s2_per_t_per_m {
+                check_range(&f("gain_m_per_s2_per_t_per_m"), g, 0.0, true, 1e5)?;
+            }
+            if let Some(b) = c.drag_per_m {
+                check_range(&f("drag_per_m"), b, 0.0, true, 1e5)?;
+            }
         }
         check_range(
             "fluid.density_kg_per_m3",
