@@ -139,6 +139,15 @@ fn init_bad_args() {
             capsule_mpc_init(buf, size, inf.as_ptr(), 2),
             CAPSULE_MPC_ERR_NON_FINITE
         );
+        // Far outside the workspace (an unconverted unit, a wild frame):
+        // refused like a target there, for each capsule.
+        for far in [[1.0e6, 0.0], [0.0, -1.0e6], [0.0601, 0.0], [0.0, -0.0601]] {
+            assert_eq!(
+                capsule_mpc_init(buf, size, far.as_ptr(), 2),
+                CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE,
+                "{far:?}"
+            );
+        }
     }
     // No failed init wrote anything: the buffer is still all zero.
     assert!(b.0.iter().all(|&x| x == 0));
@@ -152,6 +161,19 @@ fn init_bad_args() {
         unsafe { capsule_mpc_init(buf, need, ORIGIN.as_ptr(), 2) },
         CAPSULE_MPC_OK
     );
+    // reset checks the same, and a refused reset changes nothing.
+    let mut before = [0.0; 4];
+    let mut after = [0.0; 4];
+    unsafe {
+        assert_eq!(capsule_mpc_estimate(handle(&mut b), before.as_mut_ptr(), 4), CAPSULE_MPC_OK);
+        let far = [0.0, 1.0e6];
+        assert_eq!(
+            capsule_mpc_reset(handle(&mut b), far.as_ptr(), 2),
+            CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE
+        );
+        assert_eq!(capsule_mpc_estimate(handle(&mut b), after.as_mut_ptr(), 4), CAPSULE_MPC_OK);
+    }
+    assert_eq!(before, after);
 }
 
 /// Calls every handle function on `h` and checks each returns `expected`.

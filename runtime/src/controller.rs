@@ -174,6 +174,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         if positions_m.iter().any(|p| !p.is_finite()) {
             return Err(RuntimeError::NonFinite("positions_m"));
         }
+        // A start outside the workspace is a wrong argument, as a target
+        // there is (the tables cover the workspace, nothing beyond it).
+        check_workspace::<S, NX, K>("positions_m", positions_m, 1)?;
         let std = self.settings.position_noise_m.max(1e-6);
         for (i, &p) in positions_m.iter().enumerate() {
             self.filters[i] = CapsuleFilter::new(p, std);
