@@ -26,3 +26,4 @@ pub mod plant;
 pub mod qp_map;
 pub mod reach;
 pub mod report;
+pub mod request;

@@ -4,10 +4,11 @@
 use crate::cli::{load_config, SimulateArgs};
 use crate::figures::plot_run;
 use anyhow::Result;
-use capsule_mpc_generator::config::{DisturbanceConfig, DisturbanceKind};
+use capsule_mpc_generator::config::DisturbanceKind;
 use capsule_mpc_generator::model::Model;
-use capsule_mpc_sim::closed_loop::{self, Preset, RunOptions, Sampling};
-use capsule_mpc_sim::plant::{disturbance_kind_name, DisturbanceLevel};
+use capsule_mpc_sim::closed_loop::{Preset, Sampling};
+use capsule_mpc_sim::plant::DisturbanceLevel;
+use capsule_mpc_sim::request::SimulateRequest;
 
 /// `capsule-mpc simulate`.
 pub fn run(args: &SimulateArgs) -> Result<()> {
@@ -18,41 +19,29 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     );
     let config = load_config(args.config.as_deref())?;
     let model = Model::from_config(&config);
-    let target = args.target_state(model.state_count())?;
-    let mut opts = RunOptions::new(&config, target, sampling);
-    opts.start_m = args.start_positions(model.capsule_count())?;
-    opts.duration_s = args.duration;
-    opts.seed = args.seed;
-    let kind = DisturbanceKind::from(args.disturbance_model);
-    opts.disturbance = disturbance.config_of_kind(&model, args.seed, kind);
-    opts.preset = preset;
-    opts.switching = args.switching.into();
-    opts.compensate_delay = !args.no_delay_compensation;
-    opts.lose_every = args.lose_every;
-    opts.hold = !args.no_hold;
-    opts.mismatch = crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale);
-    opts.mismatch.factors(model.capsule_count())?;
-    if let Some(r) = args.refine {
-        opts.refine = r.into();
-    }
-    if let Some(d) = crate::cli::extra_delay_for(args.sampling, args.extra_delay)? {
-        opts.extra_delay_s = d;
-    }
+    let mut request = SimulateRequest::new(
+        args.target_state(model.state_count())?,
+        args.scenario_name(),
+    );
+    request.start_m = args.start_positions(model.capsule_count())?;
+    request.sampling = sampling;
+    request.disturbance = disturbance;
+    request.disturbance_kind = DisturbanceKind::from(args.disturbance_model);
+    request.seed = args.seed;
+    request.duration_s = args.duration;
+    request.preset = preset;
+    request.switching = args.switching.into();
+    request.compensate_delay = !args.no_delay_compensation;
+    request.lose_every = args.lose_every;
+    request.hold = !args.no_hold;
+    request.mismatch = crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale);
+    request.refine = args.refine.map(Into::into);
+    request.extra_delay_s = crate::cli::extra_delay_for(args.sampling, args.extra_delay)?;
+    let opts = request.options(&config)?;
     if args.pulseq.is_some() {
         crate::pulseq_export::check_timing_on_raster(&config, opts.extra_delay_s)?;
     }
-    if disturbance == DisturbanceLevel::None {
-        opts.disturbance = DisturbanceConfig::default();
-    }
-    let mut report = closed_loop::run(&config, &opts)?;
-    report.scenario = Some(args.scenario_name().to_string());
-    report.disturbance = Some(if disturbance == DisturbanceLevel::None {
-        "none".to_string()
-    } else if kind == DisturbanceKind::Random {
-        format!("{disturbance:?}").to_lowercase()
-    } else {
-        format!("{disturbance:?}-{}", disturbance_kind_name(kind)).to_lowercase()
-    });
+    let report = request.run(&config)?;
     let m = &report.metrics;
     println!(
         "scenario {} ({} sampling, {:?} preset, disturbance {}, seed {}): settle {}{}{} | in band {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",

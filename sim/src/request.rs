@@ -1,0 +1,152 @@
+//! One `simulate` run described as plain data, as the command line and the
+//! Python package take it: both build the run's options here, so the same
+//! arguments give the same run, bit for bit.
+
+use crate::closed_loop::{run, Preset, RunOptions, Sampling};
+use crate::mismatch::PlantMismatch;
+use crate::plant::{disturbance_kind_name, DisturbanceLevel};
+use crate::report::RunReport;
+use anyhow::{bail, Result};
+use capsule_mpc_generator::config::{Config, DisturbanceConfig, DisturbanceKind, RefineMode};
+use capsule_mpc_generator::model::Model;
+use capsule_mpc_runtime::controller::SwitchingRule;
+
+/// Longest run accepted, s.
+pub const MAX_DURATION_S: f64 = 600.0;
+
+/// Everything a `simulate` run takes (the CLI's defaults in `new`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimulateRequest {
+    /// Target state [x1, v1, x2, v2, ...], m and m/s.
+    pub target: Vec<f64>,
+    /// "A", "C" or "custom", for the report.
+    pub scenario: String,
+    /// Start positions, m (empty: the origin).
+    pub start_m: Vec<f64>,
+    pub sampling: Sampling,
+    pub disturbance: DisturbanceLevel,
+    pub disturbance_kind: DisturbanceKind,
+    pub seed: u64,
+    pub duration_s: f64,
+    pub preset: Preset,
+    pub switching: SwitchingRule,
+    pub compensate_delay: bool,
+    pub lose_every: Option<usize>,
+    pub hold: bool,
+    /// None: the config's `controller.refine`.
+    pub refine: Option<RefineMode>,
+    /// None: the config's extra delay (refused with ideal sampling).
+    pub extra_delay_s: Option<f64>,
+    pub mismatch: PlantMismatch,
+}
+
+impl SimulateRequest {
+    /// The CLI's defaults: variable sampling, the paper's random
+    /// disturbance, seed 1, 3 s, the default preset.
+    pub fn new(target: Vec<f64>, scenario: &str) -> SimulateRequest {
+        SimulateRequest {
+            target,
+            scenario: scenario.to_string(),
+            start_m: Vec::new(),
+            sampling: Sampling::Variable,
+            disturbance: DisturbanceLevel::Paper,
+            disturbance_kind: DisturbanceKind::Random,
+            seed: 1,
+            duration_s: 3.0,
+            preset: Preset::Default,
+            switching: SwitchingRule::Tight,
+            compensate_delay: true,
+            lose_every: None,
+            hold: true,
+            refine: None,
+            extra_delay_s: None,
+            mismatch: PlantMismatch::default(),
+        }
+    }
+
+    /// The run's options for `config`, checked (each error names the argument).
+    pub fn options(&self, config: &Config) -> Result<RunOptions> {
+        let model = Model::from_config(config);
+        let (m, n) = (model.capsule_count(), model.state_count());
+        if self.target.len() != n {
+            bail!(
+                "target has {} entries; the config has {n} states (x, v per capsule)",
+                self.target.len()
+            );
+        }
+        if self.target.iter().any(|v| !v.is_finite()) {
+            bail!("target {:?} is not finite", self.target);
+        }
+        if !self.start_m.is_empty() && self.start_m.len() != m {
+            bail!(
+                "start has {} positions; the config has {m} capsules",
+                self.start_m.len()
+            );
+        }
+        if self.start_m.iter().any(|v| !v.is_finite()) {
+            bail!("start {:?} is not finite", self.start_m);
+        }
+        if !(self.duration_s.is_finite()
+            && self.duration_s > 0.0
+            && self.duration_s <= MAX_DURATION_S)
+        {
+            bail!(
+                "duration {} s must be in (0, {MAX_DURATION_S}] s",
+                self.duration_s
+            );
+        }
+        if let (Sampling::Ideal, Some(d)) = (self.sampling, self.extra_delay_s) {
+            bail!("extra delay {d} applies to the scanner cycle (constant or variable sampling); ideal sampling has no tracking phase to delay");
+        }
+        self.mismatch.factors(m)?;
+        let mut opts = RunOptions::new(config, self.target.clone(), self.sampling);
+        opts.start_m = self.start_m.clone();
+        opts.duration_s = self.duration_s;
+        opts.seed = self.seed;
+        opts.disturbance =
+            self.disturbance
+                .config_of_kind(&model, self.seed, self.disturbance_kind);
+        opts.preset = self.preset;
+        opts.switching = self.switching;
+        opts.compensate_delay = self.compensate_delay;
+        opts.lose_every = self.lose_every;
+        opts.hold = self.hold;
+        opts.mismatch = self.mismatch.clone();
+        if let Some(r) = self.refine {
+            opts.refine = r;
+        }
+        if let Some(d) = self.extra_delay_s {
+            opts.extra_delay_s = d;
+        }
+        if self.disturbance == DisturbanceLevel::None {
+            opts.disturbance = DisturbanceConfig::default();
+        }
+        Ok(opts)
+    }
+
+    /// The disturbance's name in the report ("none", "paper",
+    /// "paper-drift", ...).
+    pub fn disturbance_name(&self) -> String {
+        if self.disturbance == DisturbanceLevel::None {
+            "none".to_string()
+        } else if self.disturbance_kind == DisturbanceKind::Random {
+            format!("{:?}", self.disturbance).to_lowercase()
+        } else {
+            format!(
+                "{:?}-{}",
+                self.disturbance,
+                disturbance_kind_name(self.disturbance_kind)
+            )
+            .to_lowercase()
+        }
+    }
+
+    /// Runs it: the report, named.
+    pub fn run(&self, config: &Config) -> Result<RunReport> {
+        let opts = self.options(config)?;
+        let mut report = run(config, &opts)?;
+        report.scenario = Some(self.scenario.clone());
+        report.disturbance = Some(self.disturbance_name());
+        Ok(report)
+    }
+}
