@@ -165,13 +165,19 @@ fn init_bad_args() {
     let mut before = [0.0; 4];
     let mut after = [0.0; 4];
     unsafe {
-        assert_eq!(capsule_mpc_estimate(handle(&mut b), before.as_mut_ptr(), 4), CAPSULE_MPC_OK);
+        assert_eq!(
+            capsule_mpc_estimate(handle(&mut b), before.as_mut_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
         let far = [0.0, 1.0e6];
         assert_eq!(
             capsule_mpc_reset(handle(&mut b), far.as_ptr(), 2),
             CAPSULE_MPC_ERR_TARGET_OUT_OF_RANGE
         );
-        assert_eq!(capsule_mpc_estimate(handle(&mut b), after.as_mut_ptr(), 4), CAPSULE_MPC_OK);
+        assert_eq!(
+            capsule_mpc_estimate(handle(&mut b), after.as_mut_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
     }
     assert_eq!(before, after);
 }

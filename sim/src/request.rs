@@ -11,9 +11,6 @@ use capsule_mpc_generator::config::{Config, DisturbanceConfig, DisturbanceKind, 
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::SwitchingRule;
 
-/// Longest run accepted, s.
-pub const MAX_DURATION_S: f64 = 600.0;
-
 /// Everything a `simulate` run takes (the CLI's defaults in `new`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimulateRequest {
@@ -85,15 +82,6 @@ impl SimulateRequest {
         }
         if self.start_m.iter().any(|v| !v.is_finite()) {
             bail!("start {:?} is not finite", self.start_m);
-        }
-        if !(self.duration_s.is_finite()
-            && self.duration_s > 0.0
-            && self.duration_s <= MAX_DURATION_S)
-        {
-            bail!(
-                "duration {} s must be in (0, {MAX_DURATION_S}] s",
-                self.duration_s
-            );
         }
         if let (Sampling::Ideal, Some(d)) = (self.sampling, self.extra_delay_s) {
             bail!("extra delay {d} applies to the scanner cycle (constant or variable sampling); ideal sampling has no tracking phase to delay");
