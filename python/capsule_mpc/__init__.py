@@ -1,0 +1,312 @@
+"""capsule-mpc from Python: closed-loop control of several magnetic capsules
+driven by one MRI gradient.
+
+Thin over the same Rust code the ``capsule-mpc`` command line runs:
+``simulate`` gives the run ``capsule-mpc simulate --json`` gives (the same
+settle time, final error and gradient, bit for bit), ``reach`` the reach
+map, ``Controller`` the runtime's closed loop in the C ABI's call order.
+Everything is SI (m, m/s, s, T/m); arrays come back as numpy arrays.
+"""
+
+import enum
+import json
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from . import _native
+
+__all__ = [
+    "Config",
+    "ConfigError",
+    "Controller",
+    "ReachMap",
+    "Run",
+    "Status",
+    "reach",
+    "simulate",
+]
+
+ConfigError = _native.ConfigError
+
+
+class Config:
+    """A capsule/scanner config: the embedded default (Table I of the
+    paper), the three-capsule preset, or a TOML file or string (the format
+    of ``configs/paper.toml``). Read-only; ``to_dict()`` gives all of it."""
+
+    def __init__(self, native):
+        self._native = native
+
+    @staticmethod
+    def default() -> "Config":
+        """The embedded default config (two capsules)."""
+        return Config(_native.Config.default())
+
+    @staticmethod
+    def three_capsules() -> "Config":
+        """The shipped three-capsule preset (``configs/three-capsules.toml``)."""
+        return Config(_native.Config.three_capsules())
+
+    @staticmethod
+    def from_toml(path) -> "Config":
+        """Reads a TOML config file. ``FileNotFoundError`` when it is missing,
+        ``ConfigError`` (a ``ValueError``) naming the field when it is bad."""
+        return Config(_native.Config.from_toml(str(path)))
+
+    @staticmethod
+    def from_str(text: str) -> "Config":
+        """Reads a config from TOML text (``ConfigError`` names a bad field)."""
+        return Config(_native.Config.from_str(text))
+
+    @property
+    def capsule_count(self) -> int:
+        """Number of capsules M."""
+        return self._native.capsule_count
+
+    @property
+    def names(self) -> List[str]:
+        """Capsule names."""
+        return self._native.names
+
+    @property
+    def g(self) -> np.ndarray:
+        """Magnetic acceleration per gradient of each capsule, m/s^2 per T/m."""
+        return np.asarray(self._native.g)
+
+    @property
+    def b(self) -> np.ndarray:
+        """Quadratic drag coefficient of each capsule, 1/m (effective at 0.1 m/s)."""
+        return np.asarray(self._native.b)
+
+    @property
+    def sample_time_s(self) -> float:
+        """Controller sample time, s."""
+        return self._native.sample_time_s
+
+    @property
+    def tracking_time_s(self) -> float:
+        """Tracking phase length, s."""
+        return self._native.tracking_time_s
+
+    @property
+    def u_max_t_per_m(self) -> float:
+        """Gradient bound, T/m."""
+        return self._native.u_max_t_per_m
+
+    @property
+    def workspace(self):
+        """(lowest, highest) position of a target or start, m."""
+        return self._native.workspace
+
+    def to_dict(self) -> Dict:
+        """The whole config as a dict (SI)."""
+        return json.loads(self._native.to_json())
+
+    def __repr__(self) -> str:
+        return f"Config(capsules={self.names}, g={list(self.g)}, b={list(self.b)})"
+
+
+def _config(config: Optional[Config]) -> Config:
+    if config is None:
+        return Config.default()
+    if not isinstance(config, Config):
+        raise TypeError(f"config must be a capsule_mpc.Config, not {type(config).__name__}")
+    return config
+
+
+def _target_state(target, m: int) -> List[float]:
+    t = [float(v) for v in np.asarray(target, dtype=float).ravel()]
+    if len(t) == m:
+        return [v for p in t for v in (p, 0.0)]
+    if len(t) == 2 * m:
+        return t
+    raise ValueError(f"target has {len(t)} entries; give {m} positions (m) or the full state of {2 * m}")
+
+
+class Run:
+    """One closed-loop run: ``t`` (T,), ``x`` (T, 2M) true states, ``u`` (T,)
+    gradients (``u[k]`` holds from ``t[k]`` to ``t[k+1]``), ``phase`` (T,)
+    strings ('track' or 'actuate'), ``measurements`` (list of dicts),
+    ``metrics`` (the CLI's metrics, same keys and values); ``to_json()`` is
+    the CLI's JSON."""
+
+    def __init__(self, text: str):
+        self._json = text
+        d = json.loads(text)
+        self.t = np.asarray(d["t"], dtype=float)
+        self.x = np.asarray(d["x"], dtype=float)
+        self.u = np.asarray(d["u"], dtype=float)
+        self.phase = np.asarray([str(p).lower() for p in d["phase"]])
+        self.measurements = d["measurements"]
+        self.metrics = d["metrics"]
+        self.target = np.asarray(d["target"], dtype=float)
+        self.frames = d.get("frames")
+        self.plant = d.get("plant")
+
+    @property
+    def settle_time_s(self) -> Optional[float]:
+        """Strict settle time (in the 1 mm / 5 mm/s band to the end), s; None if never."""
+        return self.metrics["settle_time_s"]
+
+    def to_json(self) -> str:
+        """The run as ``capsule-mpc simulate --json`` writes it."""
+        return self._json
+
+    def __repr__(self) -> str:
+        return f"Run(rows={len(self.t)}, settle_time_s={self.settle_time_s})"
+
+
+def simulate(
+    target: Sequence[float],
+    *,
+    start: Optional[Sequence[float]] = None,
+    config: Optional[Config] = None,
+    sampling: str = "variable",
+    disturbance: str = "paper",
+    disturbance_model: str = "random",
+    seed: int = 1,
+    duration_s: float = 3.0,
+    refine: Optional[str] = None,
+    plant_drag_scale=None,
+    plant_gain_scale=None,
+) -> Run:
+    """One closed-loop run in the plant simulator, from rest at ``start``
+    (positions, m; the origin when None) to ``target`` (M positions in m,
+    speeds 0, or the full state of 2M). ``sampling``: 'ideal', 'constant'
+    or 'variable'; ``disturbance``: 'none', 'paper' or 'stress';
+    ``disturbance_model``: 'random', 'drift' or 'constant'; ``refine``:
+    None (the config's), 'none', 'once' or 'per-sample'; the plant's drag
+    and gain as factors of the model's (one for all or one per capsule).
+    Releases the GIL while it runs. ``ValueError`` names a bad argument."""
+    cfg = _config(config)
+    scale = lambda s: None if s is None else [float(v) for v in np.atleast_1d(s)]
+    text = _native.simulate_json(
+        cfg._native,
+        _target_state(target, cfg.capsule_count),
+        None if start is None else [float(v) for v in start],
+        sampling,
+        disturbance,
+        disturbance_model,
+        int(seed),
+        float(duration_s),
+        refine,
+        scale(plant_drag_scale),
+        scale(plant_gain_scale),
+    )
+    return Run(text)
+
+
+class ReachMap:
+    """Every target of a grid: ``targets_m`` (P, M), ``settle_time_s``,
+    ``min_time_bound_s`` and ``ratio`` (P,) with NaN where refused or never
+    settled, and for two capsules the same as grids (``grid_*``, first
+    capsule's position along axis 0); ``summary`` is the CLI's."""
+
+    def __init__(self, text: str, axis_cm: np.ndarray):
+        d = json.loads(text)
+        pts = d["points"]
+        self.summary = d["summary"]
+        nan = float("nan")
+        val = lambda p, k: nan if p.get(k) is None else float(p[k])
+        self.targets_m = np.asarray([p["target_m"] for p in pts], dtype=float)
+        self.refused = [p["refused"] for p in pts]
+        self.settle_time_s = np.asarray([val(p, "settle_time_s") for p in pts])
+        self.min_time_bound_s = np.asarray([val(p, "min_time_bound_s") for p in pts])
+        self.ratio = np.asarray([val(p, "settle_over_bound") for p in pts])
+        self.axis_m = axis_cm / 100.0
+        if self.targets_m.shape[1:] == (2,):
+            n = len(self.axis_m)
+            grids = {k: np.full((n, n), nan) for k in ("settle", "bound", "ratio")}
+            for p, s, b, r in zip(self.targets_m, self.settle_time_s, self.min_time_bound_s, self.ratio):
+                i = int(np.argmin(np.abs(self.axis_m - p[0])))
+                j = int(np.argmin(np.abs(self.axis_m - p[1])))
+                grids["settle"][i, j], grids["bound"][i, j], grids["ratio"][i, j] = s, b, r
+            self.grid_settle_time_s = grids["settle"]
+            self.grid_min_time_bound_s = grids["bound"]
+            self.grid_ratio = grids["ratio"]
+
+    def summary_line(self) -> str:
+        """The summary as the CLI prints it (the counts and the ratios)."""
+        s = self.summary
+        f = lambda v: "-" if v is None else f"{v:.2f}"
+        return (
+            f"{s['targets']} targets: {s['refused']} refused, {s['never_settled']} never settled; "
+            f"settle / min-time bound median {f(s['median_settle_over_bound'])} worst {f(s['worst_settle_over_bound'])}; "
+            f"settle time median {f(s['median_settle_time_s'])} s worst {f(s['worst_settle_time_s'])} s"
+        )
+
+
+def reach(
+    *,
+    config: Optional[Config] = None,
+    range_cm: float = 4.0,
+    step_cm: float = 1.0,
+    sampling: str = "ideal",
+    disturbance: str = "none",
+    seed: int = 1,
+) -> ReachMap:
+    """The closed loop from rest at the origin to every target of the grid
+    (``range_cm`` half-width, ``step_cm`` spacing, per capsule) on both
+    cores; releases the GIL and prints nothing."""
+    cfg = _config(config)
+    text = _native.reach_json(cfg._native, float(range_cm), float(step_cm), sampling, disturbance, int(seed))
+    half = int(np.floor(range_cm / step_cm + 1e-9))
+    return ReachMap(text, np.arange(-half, half + 1) * float(step_cm))
+
+
+class Status(enum.IntEnum):
+    """Status of one cycle (the C ABI's CAPSULE_MPC_STATUS_* values)."""
+
+    OK = 0
+    FALLBACK = 1
+    ITERATION_LIMIT = 2
+    MEASUREMENT_REJECTED = 3
+    MEASUREMENT_LOST = 4
+    NO_TARGET = 5
+    REACQUIRED = 6
+    ABOVE_ITERATION_MAP = 7
+    RECOVERING = 8
+
+
+class Controller:
+    """The runtime's closed loop for a lab's own plant or hardware, in the C
+    ABI's order: ``set_sampling`` (before the loop), ``set_target``, then per
+    cycle ``feed_tracking`` (or ``feed_state`` under ideal sampling) and
+    ``next_actuation``. Only the compiled-in controllers are available: the
+    default two-capsule config's and the three-capsule preset's (another
+    config raises ``ConfigError``: regenerate and rebuild). The step does
+    not allocate inside the runtime."""
+
+    def __init__(self, config: Optional[Config] = None, positions: Sequence[float] = (0.0, 0.0)):
+        cfg = _config(config)
+        self._native = _native.Controller(cfg._native, [float(p) for p in positions])
+
+    def set_sampling(self, sampling: str) -> None:
+        """'ideal', 'constant' or 'variable' (only before the loop runs)."""
+        self._native.set_sampling(sampling)
+
+    def set_target(self, target: Sequence[float]) -> None:
+        """Target state [x1, 0, x2, 0, ...] (m), inside the workspace."""
+        self._native.set_target([float(v) for v in target])
+
+    def feed_tracking(self, positions: Sequence[float], t_measured_s: float, lost: bool = False) -> None:
+        """The frame measured at ``t_measured_s`` (scanner clock, s); ``lost``: no frame."""
+        self._native.feed_tracking([float(v) for v in positions], float(t_measured_s), bool(lost))
+
+    def feed_state(self, state: Sequence[float]) -> None:
+        """The full state [x1, v1, ...] (ideal sampling)."""
+        self._native.feed_state([float(v) for v in state])
+
+    def next_actuation(self, t_actuation_start_s: float):
+        """(gradients to play from ``t_actuation_start_s``, one per sample, T/m; ``Status``)."""
+        u, status = self._native.next_actuation(float(t_actuation_start_s))
+        return np.asarray(u, dtype=float), Status(status)
+
+    def estimate(self) -> np.ndarray:
+        """The estimated state [x1, v1, ...] at the end of the last actuation phase."""
+        return np.asarray(self._native.estimate(), dtype=float)
+
+    def reset(self, positions: Sequence[float]) -> None:
+        """Restarts the estimate at rest at ``positions`` (keeps the target)."""
+        self._native.reset([float(p) for p in positions])

@@ -1,0 +1,106 @@
+import enum
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+class ConfigError(ValueError): ...
+
+class Config:
+    @staticmethod
+    def default() -> Config: ...
+    @staticmethod
+    def three_capsules() -> Config: ...
+    @staticmethod
+    def from_toml(path: object) -> Config: ...
+    @staticmethod
+    def from_str(text: str) -> Config: ...
+    @property
+    def capsule_count(self) -> int: ...
+    @property
+    def names(self) -> List[str]: ...
+    @property
+    def g(self) -> np.ndarray: ...
+    @property
+    def b(self) -> np.ndarray: ...
+    @property
+    def sample_time_s(self) -> float: ...
+    @property
+    def tracking_time_s(self) -> float: ...
+    @property
+    def u_max_t_per_m(self) -> float: ...
+    @property
+    def workspace(self) -> Tuple[float, float]: ...
+    def to_dict(self) -> Dict: ...
+
+class Run:
+    t: np.ndarray
+    x: np.ndarray
+    u: np.ndarray
+    phase: np.ndarray
+    measurements: List[Dict]
+    metrics: Dict
+    target: np.ndarray
+    frames: Optional[Dict]
+    plant: Optional[Dict]
+    @property
+    def settle_time_s(self) -> Optional[float]: ...
+    def to_json(self) -> str: ...
+
+def simulate(
+    target: Sequence[float],
+    *,
+    start: Optional[Sequence[float]] = ...,
+    config: Optional[Config] = ...,
+    sampling: str = ...,
+    disturbance: str = ...,
+    disturbance_model: str = ...,
+    seed: int = ...,
+    duration_s: float = ...,
+    refine: Optional[str] = ...,
+    plant_drag_scale: Optional[object] = ...,
+    plant_gain_scale: Optional[object] = ...,
+) -> Run: ...
+
+class ReachMap:
+    targets_m: np.ndarray
+    refused: List[Optional[str]]
+    settle_time_s: np.ndarray
+    min_time_bound_s: np.ndarray
+    ratio: np.ndarray
+    axis_m: np.ndarray
+    grid_settle_time_s: np.ndarray
+    grid_min_time_bound_s: np.ndarray
+    grid_ratio: np.ndarray
+    summary: Dict
+    def summary_line(self) -> str: ...
+
+def reach(
+    *,
+    config: Optional[Config] = ...,
+    range_cm: float = ...,
+    step_cm: float = ...,
+    sampling: str = ...,
+    disturbance: str = ...,
+    seed: int = ...,
+) -> ReachMap: ...
+
+class Status(enum.IntEnum):
+    OK = 0
+    FALLBACK = 1
+    ITERATION_LIMIT = 2
+    MEASUREMENT_REJECTED = 3
+    MEASUREMENT_LOST = 4
+    NO_TARGET = 5
+    REACQUIRED = 6
+    ABOVE_ITERATION_MAP = 7
+    RECOVERING = 8
+
+class Controller:
+    def __init__(self, config: Optional[Config] = ..., positions: Sequence[float] = ...) -> None: ...
+    def set_sampling(self, sampling: str) -> None: ...
+    def set_target(self, target: Sequence[float]) -> None: ...
+    def feed_tracking(self, positions: Sequence[float], t_measured_s: float, lost: bool = ...) -> None: ...
+    def feed_state(self, state: Sequence[float]) -> None: ...
+    def next_actuation(self, t_actuation_start_s: float) -> Tuple[np.ndarray, Status]: ...
+    def estimate(self) -> np.ndarray: ...
+    def reset(self, positions: Sequence[float]) -> None: ...

@@ -1,0 +1,187 @@
+"""The Python package against the CLI and the runtime: same runs, same
+errors, the closed loop around a Python plant."""
+
+import json
+import math
+import os
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+import capsule_mpc as cm
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CLI = os.path.join(REPO, "target", "release", "capsule-mpc")
+
+
+def test_default_config_constants():
+    c = cm.Config.default()
+    assert c.capsule_count == 2
+    assert np.allclose(c.g, [173.2484, 173.2484], rtol=1e-6)
+    assert np.allclose(c.b, [134.713, 16.839], rtol=1e-4)
+    assert c.sample_time_s == 0.02 and c.u_max_t_per_m == 0.04
+    assert c.workspace == (-0.06, 0.06)
+    assert c.to_dict()["scanner"]["max_gradient_t_per_m"] == 0.04
+
+
+def test_three_capsule_config():
+    assert cm.Config.three_capsules().capsule_count == 3
+
+
+def test_config_file_errors(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        cm.Config.from_toml(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    text = cm.Config.default().to_dict()
+    toml = open(os.path.join(REPO, "configs", "paper.toml")).read().replace("max_gradient_t_per_m = 0.04", "max_gradient_t_per_m = -1.0")
+    bad.write_text(toml)
+    with pytest.raises(cm.ConfigError, match="max_gradient_t_per_m"):
+        cm.Config.from_toml(bad)
+    assert issubclass(cm.ConfigError, ValueError)
+    assert text
+
+
+def test_config_from_str():
+    toml = open(os.path.join(REPO, "configs", "paper.toml")).read()
+    assert cm.Config.from_str(toml).capsule_count == 2
+    with pytest.raises(cm.ConfigError):
+        cm.Config.from_str("[[capsule]]\nname = 'x'\n")
+
+
+def test_simulate_scenario_c_settles():
+    run = cm.simulate([0.02, -0.01], sampling="ideal", disturbance="none")
+    assert run.x.shape == (len(run.t), 4) and run.u.shape == run.t.shape
+    assert 0.7 < run.settle_time_s < 0.8
+    assert run.metrics["final_position_error_m"] < 1e-3
+    assert set(run.phase) <= {"track", "actuate"}
+
+
+def test_target_as_full_state_is_the_same_run():
+    a = cm.simulate([0.02, -0.01], sampling="ideal", disturbance="none")
+    b = cm.simulate([0.02, 0.0, -0.01, 0.0], sampling="ideal", disturbance="none")
+    assert np.array_equal(a.u, b.u)
+
+
+@pytest.mark.skipif(not os.path.exists(CLI), reason="the CLI is not built (cargo build --release)")
+@pytest.mark.parametrize("sampling,disturbance", [("ideal", "none"), ("constant", "paper"), ("variable", "stress")])
+def test_simulate_is_the_cli_bit_for_bit(tmp_path, sampling, disturbance):
+    out = tmp_path / "run.json"
+    subprocess.run(
+        [CLI, "simulate", "--target", "0.02,0,-0.01,0", "--sampling", sampling, "--disturbance", disturbance, "--seed", "3", "--json", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    cli = json.loads(out.read_text())
+    py = cm.simulate([0.02, -0.01], sampling=sampling, disturbance=disturbance, seed=3)
+    assert py.u.tolist() == cli["u"]
+    assert py.metrics["settle_time_s"] == cli["metrics"]["settle_time_s"]
+    assert py.metrics["final_position_error_m"] == cli["metrics"]["final_position_error_m"]
+    ours = json.loads(py.to_json())
+    for k in ("t", "x", "u", "target", "measurements"):
+        assert ours[k] == cli[k]
+
+
+def test_bad_target_length():
+    with pytest.raises(ValueError, match="target has 3 entries"):
+        cm.simulate([0.01, 0.02, 0.03])
+
+
+def test_target_outside_workspace_names_capsule_and_excess():
+    with pytest.raises(ValueError, match=r"capsule 2 at 0.09 m is outside the workspace .* by 0.0300 m"):
+        cm.simulate([0.01, 0.09], sampling="ideal", disturbance="none")
+
+
+def test_unknown_sampling():
+    with pytest.raises(ValueError, match="sampling 'fast' is not one of"):
+        cm.simulate([0.01, 0.01], sampling="fast")
+
+
+def test_unknown_disturbance_and_refine():
+    with pytest.raises(ValueError, match="disturbance"):
+        cm.simulate([0.01, 0.01], disturbance="huge")
+    with pytest.raises(ValueError, match="refine 'always'"):
+        cm.simulate([0.01, 0.01], refine="always")
+
+
+def test_non_finite_position():
+    with pytest.raises(ValueError, match="not finite"):
+        cm.simulate([0.01, float("nan")])
+    c = cm.Controller()
+    c.set_target([0.02, 0.0, -0.01, 0.0])
+    with pytest.raises(ValueError, match="not finite"):
+        c.feed_tracking([0.0, float("inf")], 0.0)
+
+
+def test_plant_off_the_model_is_recorded():
+    run = cm.simulate([0.02, 0.03], sampling="constant", duration_s=2.0, plant_drag_scale=[1.2, 0.8], plant_gain_scale=0.9)
+    assert run.plant["drag_scale"] == [1.2, 0.8] and run.plant["gain_scale"] == [0.9, 0.9]
+    with pytest.raises(ValueError, match="plant drag scale"):
+        cm.simulate([0.02, 0.03], plant_drag_scale=[1.0, 1.0, 1.0])
+
+
+def test_reach_map_grids():
+    m = cm.reach(range_cm=2.0, step_cm=1.0)
+    assert m.summary["targets"] == 24 and m.summary["refused"] == 0
+    assert m.grid_ratio.shape == (5, 5)
+    assert math.isnan(m.grid_ratio[2, 2])  # the start itself is not a target
+    assert np.nanmax(m.ratio) < 1.6
+    assert "24 targets" in m.summary_line()
+
+
+def _plant_step(x, u, b, g, h):
+    """One RK4 step of the capsules (drag -b v|v|, gain g), for a Python plant."""
+    def f(s):
+        d = np.empty_like(s)
+        d[0::2] = s[1::2]
+        d[1::2] = -b * s[1::2] * np.abs(s[1::2]) + g * u
+        return d
+    k1 = f(x); k2 = f(x + 0.5 * h * k1); k3 = f(x + 0.5 * h * k2); k4 = f(x + h * k3)
+    return x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+@pytest.mark.parametrize("target", [[0.02, 0.0, 0.03, 0.0], [0.02, 0.0, -0.01, 0.0]])
+def test_python_closed_loop_matches_the_rust_simulator(target):
+    cfg = cm.Config.default()
+    c = cm.Controller(cfg, [0.0, 0.0])
+    c.set_sampling("ideal")
+    c.set_target(target)
+    x = np.zeros(4)
+    xs, t, settle = [], 0.0, None
+    overhead = []
+    for _ in range(150):
+        t0 = time.perf_counter()
+        c.feed_state(x)
+        u, status = c.next_actuation(t)
+        overhead.append(time.perf_counter() - t0)
+        assert status in (cm.Status.OK, cm.Status.ABOVE_ITERATION_MAP)
+        for k in range(20):  # 1 ms steps of the 20 ms sample, as the Rust plant
+            x = _plant_step(x, u[0], cfg.b, cfg.g, 1e-3)
+            xs.append((t + (k + 1) * 1e-3, x.copy()))
+        t += cfg.sample_time_s
+    # Strict settle on the 1 ms rows, as the Rust simulator's metrics.
+    tgt = np.asarray(target)
+    inside = [np.all(np.abs(s[0::2] - tgt[0::2]) <= 1e-3) and np.all(np.abs(s[1::2]) < 5e-3) for _, s in xs]
+    for k in range(len(xs) - 1, -1, -1):
+        if not inside[k]:
+            settle = xs[k][0]
+            break
+    rust = cm.simulate(target, sampling="ideal", disturbance="none").settle_time_s
+    assert settle is not None and abs(settle - rust) <= 0.005, (settle, rust)
+    assert np.median(overhead) < 5e-3
+
+
+def test_controller_errors_and_status_enum():
+    with pytest.raises(ValueError, match="outside the workspace"):
+        cm.Controller(positions=[0.0, 1.0e6])
+    c = cm.Controller()
+    with pytest.raises(ValueError, match="target has 3 entries"):
+        c.set_target([0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="feed_state outside ideal sampling"):
+        c.feed_state([0.0, 0.0, 0.0, 0.0])
+    u, status = c.next_actuation(0.0)
+    assert status == cm.Status.NO_TARGET and status.name == "NO_TARGET"
+    with pytest.raises(cm.ConfigError):
+        toml = open(os.path.join(REPO, "configs", "paper.toml")).read().replace("sphere_radius_m = 0.0015", "sphere_radius_m = 0.0010")
+        cm.Controller(cm.Config.from_str(toml))
