@@ -290,12 +290,15 @@ fn state_outside_the_tables_falls_back_to_braking() {
     let ours = coasting_after(&x, braking_gradient::<Solver, NX, K>(&x));
     assert!(coasting_after(&x, mean_law) > ours + 0.01, "{ours}");
 
-    // The same through the scanner cycle: the estimate restarted far away.
+    // The same through the scanner cycle: the estimate restarted at the
+    // workspace's edge, outside the tables from A (beyond the workspace a
+    // restart is refused).
     let mut c = controller(Sampling::Constant, &A);
-    c.reset(&[0.5, -0.5]).unwrap();
-    let out = c.cycle(Some(&[0.5, -0.5])).unwrap();
+    assert!(c.reset(&[0.5, -0.5]).is_err());
+    c.reset(&[0.06, -0.06]).unwrap();
+    let out = c.cycle(Some(&[0.06, -0.06])).unwrap();
     assert_eq!(out.status, RuntimeStatus::Fallback);
-    assert_safe(&out, "cycle, 50 cm off");
+    assert_safe(&out, "cycle, at the workspace's edge");
     assert_eq!(
         out.gradients_t_per_m[0],
         braking_gradient::<Solver, NX, K>(out.estimate[..NX].try_into().unwrap())

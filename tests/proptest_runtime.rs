@@ -374,6 +374,10 @@ proptest! {
                 prop_assert!(start.iter().any(|p| !p.is_finite()));
                 return Ok(());
             }
+            Err(RuntimeError::OutsideWorkspace { argument: "positions_m", capsule, .. }) => {
+                prop_assert!(!(spec::WORKSPACE_MIN_M..=spec::WORKSPACE_MAX_M).contains(&start[capsule]));
+                return Ok(());
+            }
             Err(e) => return Err(TestCaseError::fail(format!("new: {e:?}"))),
         };
         // A target that is always covered from the start, so that some
@@ -442,6 +446,12 @@ proptest! {
                 }
                 Op::Reset(p) => match ctl.reset(p) {
                     Ok(()) => prop_assert_eq!(ctl.estimate()[0], p[0]),
+                    // Outside the workspace a restart is refused, naming
+                    // the capsule (nothing changes).
+                    Err(RuntimeError::OutsideWorkspace { argument, capsule, .. }) => {
+                        prop_assert_eq!(argument, "positions_m");
+                        prop_assert!(!(spec::WORKSPACE_MIN_M..=spec::WORKSPACE_MAX_M).contains(&p[capsule]));
+                    }
                     Err(e) => prop_assert_eq!(e, RuntimeError::NonFinite("positions_m")),
                 },
             }

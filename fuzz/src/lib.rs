@@ -591,6 +591,15 @@ fn run_controller<S: PlanSolver<NX2, K>, const NX2: usize, const K: usize>(
             assert_eq!(name, "positions_m");
             return;
         }
+        // A start outside the workspace is refused like a target there.
+        Err(RuntimeError::OutsideWorkspace {
+            argument: "positions_m",
+            capsule,
+            ..
+        }) => {
+            assert!(!(S::WORKSPACE_MIN_M..=S::WORKSPACE_MAX_M).contains(&start[capsule]));
+            return;
+        }
         Err(e) => panic!("new: {e:?}"),
     };
     let u_max = S::U_MAX_T_PER_M;
@@ -703,7 +712,12 @@ fn run_controller<S: PlanSolver<NX2, K>, const NX2: usize, const K: usize>(
                 let Some(z) = inp.array::<2>() else { return };
                 match c.reset(&z[..m.min(2)]) {
                     Ok(()) => {}
-                    Err(e) => assert_eq!(e, RuntimeError::NonFinite("positions_m")),
+                    Err(RuntimeError::NonFinite("positions_m"))
+                    | Err(RuntimeError::OutsideWorkspace {
+                        argument: "positions_m",
+                        ..
+                    }) => {}
+                    Err(e) => panic!("reset: {e:?}"),
                 }
             }
             _ => {

@@ -204,8 +204,10 @@ fn every_output_respects_u_max() {
                         let _ = l.ctl.set_target(&C);
                     }
                     if k == 80 {
-                        // Restart the estimate far outside the tables.
-                        l.ctl.reset(&[0.5, -0.5]).unwrap();
+                        // A restart outside the workspace is refused; at
+                        // its edge, the estimate is outside the tables.
+                        assert!(l.ctl.reset(&[0.5, -0.5]).is_err());
+                        l.ctl.reset(&[0.06, -0.06]).unwrap();
                     }
                     let out = if k == 70 && sampling == Sampling::Ideal {
                         // A state jump outside the tables (the plant's next
