@@ -17,12 +17,15 @@ import numpy as np
 from . import _native
 
 __all__ = [
+    "Calibration",
     "Config",
     "ConfigError",
     "Controller",
     "ReachMap",
     "Run",
     "Status",
+    "calibrate",
+    "design_excitation",
     "reach",
     "simulate",
 ]
@@ -253,6 +256,60 @@ def reach(
     text = _native.reach_json(cfg._native, float(range_cm), float(step_cm), sampling, disturbance, int(seed))
     half = int(np.floor(range_cm / step_cm + 1e-9))
     return ReachMap(text, np.arange(-half, half + 1) * float(step_cm))
+
+
+class Calibration:
+    """A fit of every capsule's gain (m/s^2 per T/m) and drag (1/m):
+    ``capsules`` (list of dicts: name, gain, gain_stderr, gain_ci95, drag,
+    drag_stderr, drag_ci95, gain_model, drag_model, x0_m, v0_m_per_s,
+    measurements, residual_rms_m), ``residual_rms_m``, ``warnings``, and
+    ``fitted_config`` (the base config with the fitted values, a
+    ``Config``; ``fitted_config_toml`` its TOML for ``generate --config``)."""
+
+    def __init__(self, text: str):
+        d = json.loads(text)
+        c = d["calibration"]
+        self.capsules = c["capsules"]
+        self.residual_rms_m = c["residual_rms_m"]
+        self.drag_law = c["drag_law"]
+        self.warnings = c["warnings"]
+        self.gain = np.asarray([k["gain"] for k in self.capsules])
+        self.drag = np.asarray([k["drag"] for k in self.capsules])
+        self.fitted_config_toml = d["fitted_config_toml"]
+        self.fitted_config = Config.from_str(self.fitted_config_toml)
+
+
+def calibrate(log, config: Optional[Config] = None, min_measurements: int = 20) -> Calibration:
+    """Fits each capsule's gain and drag to a tracking log: a path to a CSV
+    (``t_s,gradient_t_per_m,x1_m,...``, docs/calibrate.md) or run JSON, or
+    arrays ``(t_s, gradient_t_per_m, positions_m)`` with positions of shape
+    (T, M) and NaN where not measured. ``ValueError`` names the line and
+    column of a malformed log."""
+    cfg = _config(config)
+    if isinstance(log, (tuple, list)) and len(log) == 3:
+        t, u, x = (np.asarray(a, dtype=float) for a in log)
+        if x.ndim != 2 or x.shape[0] != t.shape[0] or u.shape != t.shape:
+            raise ValueError("log arrays: t (T,), gradient (T,) and positions (T, M) must agree in T")
+        lines = ["t_s,gradient_t_per_m," + ",".join(f"x{i + 1}_m" for i in range(x.shape[1]))]
+        for k in range(len(t)):
+            cells = ["" if np.isnan(v) else repr(float(v)) for v in x[k]]
+            lines.append(",".join([repr(float(t[k])), repr(float(u[k]))] + cells))
+        text = "\n".join(lines) + "\n"
+    else:
+        with open(log) as f:
+            text = f.read()
+    return Calibration(_native.calibrate_json(cfg._native, text, int(min_measurements)))
+
+
+def design_excitation(config: Optional[Config] = None, duration_s: float = 10.0) -> Dict:
+    """The excitation that identifies every capsule's gain and drag: a dict
+    with ``csv`` (the log to play, positions empty), ``t_s``,
+    ``gradient_t_per_m``, ``actuation_rows`` and the model's
+    ``predicted_m`` (M, T) from rest."""
+    cfg = _config(config)
+    d = json.loads(_native.design_excitation_json(cfg._native, float(duration_s)))
+    d["predicted_m"] = np.asarray(d["predicted_m"])
+    return d
 
 
 class Status(enum.IntEnum):

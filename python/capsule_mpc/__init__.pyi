@@ -84,6 +84,19 @@ def reach(
     seed: int = ...,
 ) -> ReachMap: ...
 
+class Calibration:
+    capsules: List[Dict]
+    residual_rms_m: float
+    drag_law: str
+    warnings: List[str]
+    gain: np.ndarray
+    drag: np.ndarray
+    fitted_config_toml: str
+    fitted_config: Config
+
+def calibrate(log: object, config: Optional[Config] = ..., min_measurements: int = ...) -> Calibration: ...
+def design_excitation(config: Optional[Config] = ..., duration_s: float = ...) -> Dict: ...
+
 class Status(enum.IntEnum):
     OK = 0
     FALLBACK = 1

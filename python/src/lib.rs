@@ -233,6 +233,55 @@ fn reach_json(
         .map_err(value_error)
 }
 
+/// Fits the capsules' gain and drag to a log (CSV text in the documented
+/// format, or the run JSON of `simulate`): `{"calibration": ..., "fitted_config_toml": ...}`.
+#[pyfunction]
+#[pyo3(signature = (config, text, min_measurements))]
+fn calibrate_json(
+    py: Python<'_>,
+    config: &PyConfig,
+    text: &str,
+    min_measurements: usize,
+) -> PyResult<String> {
+    use capsule_mpc_calibrate::{fit, fitted_config, FitSettings, TrackingLog};
+    let m = config.inner.capsule_count();
+    let log = if text.trim_start().starts_with('{') {
+        TrackingLog::from_run_json(text, m, min_measurements)
+    } else {
+        TrackingLog::from_csv(text, m, min_measurements)
+    }
+    .map_err(value_error)?;
+    let cfg = config.inner.clone();
+    let cal = py
+        .allow_threads(|| fit(&log, &cfg, &FitSettings::default()))
+        .map_err(value_error)?;
+    let fitted = fitted_config(&cfg, &cal);
+    fitted
+        .validate()
+        .map_err(|e| ConfigError::new_err(e.to_string()))?;
+    let toml = toml::to_string(&fitted).map_err(value_error)?;
+    serde_json::to_string(&serde_json::json!({"calibration": cal, "fitted_config_toml": toml}))
+        .map_err(value_error)
+}
+
+/// The excitation of `duration_s`: its log CSV (positions empty) and the
+/// model's predicted positions.
+#[pyfunction]
+#[pyo3(signature = (config, duration_s))]
+fn design_excitation_json(config: &PyConfig, duration_s: f64) -> PyResult<String> {
+    let e =
+        capsule_mpc_calibrate::design_excitation(&config.inner, duration_s).map_err(value_error)?;
+    serde_json::to_string(&serde_json::json!({
+        "csv": e.log.to_csv(),
+        "t_s": e.log.t_s,
+        "gradient_t_per_m": e.log.gradient_t_per_m,
+        "actuation_rows": e.actuation_rows,
+        "predicted_m": e.predicted_m,
+        "push_samples": e.push_samples,
+    }))
+    .map_err(value_error)
+}
+
 /// What the host fed since the last actuation (as the C ABI keeps it).
 #[derive(Clone, Copy)]
 enum Pending<const NX: usize> {
@@ -435,6 +484,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyController>()?;
     m.add_function(wrap_pyfunction!(simulate_json, m)?)?;
     m.add_function(wrap_pyfunction!(reach_json, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate_json, m)?)?;
+    m.add_function(wrap_pyfunction!(design_excitation_json, m)?)?;
     m.add("ConfigError", m.py().get_type::<ConfigError>())?;
     let _ = (
         DefaultController::default_settings,

@@ -185,3 +185,37 @@ def test_controller_errors_and_status_enum():
     with pytest.raises(cm.ConfigError):
         toml = open(os.path.join(REPO, "configs", "paper.toml")).read().replace("sphere_radius_m = 0.0015", "sphere_radius_m = 0.0010")
         cm.Controller(cm.Config.from_str(toml))
+
+
+def _play(design, b, g, noise_m, seed):
+    """Plays the designed excitation on a Python plant; positions (T, M) with NaN off the tracking rows."""
+    rng = np.random.default_rng(seed)
+    t, u = np.asarray(design["t_s"]), np.asarray(design["gradient_t_per_m"])
+    act = set(design["actuation_rows"])
+    x = np.zeros(2 * len(b))
+    pos = np.full((len(t), len(b)), np.nan)
+    for k in range(len(t)):
+        if k not in act:
+            pos[k] = x[0::2] + rng.normal(0.0, noise_m, len(b))
+        if k + 1 < len(t):
+            n = int(np.ceil((t[k + 1] - t[k]) / 1e-3))
+            for _ in range(n):
+                x = _plant_step(x, u[k], b, g, (t[k + 1] - t[k]) / n)
+    return t, u, pos
+
+
+def test_calibrate_recovers_an_off_model_plant():
+    cfg = cm.Config.default()
+    d = cm.design_excitation(cfg, 10.0)
+    b, g = cfg.b * np.array([1.2, 0.8]), cfg.g * np.array([0.9, 1.1])
+    cal = cm.calibrate(_play(d, b, g, 2e-4, 1), cfg)
+    assert np.all(np.abs(cal.gain / g - 1) < 0.02) and np.all(np.abs(cal.drag / b - 1) < 0.02)
+    assert cal.warnings == [] and cal.residual_rms_m < 3e-4
+    assert np.allclose(cal.fitted_config.g, cal.gain) and np.allclose(cal.fitted_config.b, cal.drag)
+
+
+def test_calibrate_refuses_a_malformed_log(tmp_path):
+    p = tmp_path / "log.csv"
+    p.write_text("t_s,gradient_t_per_m,x1_m,x2_m\n0,0,0,0\n0.02,abc,,\n")
+    with pytest.raises(ValueError, match="line 3, column 2"):
+        cm.calibrate(p)
