@@ -29,6 +29,24 @@ const CG_TRANSITION_EXPONENT: f64 = 1.16;
 const STOKES_CD_RE: f64 = 24.0;
 
 impl DragLaw {
+    /// The law with its coefficient times `factor` (1: the law itself, bit
+    /// for bit).
+    #[inline(always)]
+    pub fn scaled(self, factor: f64) -> DragLaw {
+        match self {
+            DragLaw::Quadratic { b_per_m } => DragLaw::Quadratic {
+                b_per_m: b_per_m * factor,
+            },
+            DragLaw::SphereCorrelation {
+                k_per_m,
+                re_per_speed_s_per_m,
+            } => DragLaw::SphereCorrelation {
+                k_per_m: k_per_m * factor,
+                re_per_speed_s_per_m,
+            },
+        }
+    }
+
     /// Drag acceleration (m/s^2) at speed `v_m_per_s` and its slope
     /// d a / d v (1/s). Finite at v = 0 for both laws.
     #[inline]

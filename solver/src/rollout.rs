@@ -123,9 +123,10 @@ pub fn rk4_capsule<S: Spec<M, NX>, const M: usize, const NX: usize>(
 ) -> ([f64; 2], [f64; 4], [f64; 2]) {
     const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
     const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
+    // The factors fold into the coefficients once per step, off the
+    // latency-bound stage chain.
     let g = S::G[i] * scale[0];
-    let drag = S::DRAG[i];
-    let drag_scale = scale[1];
+    let drag = S::DRAG[i].scaled(scale[1]);
     let mut k_prev_v = 0.0;
     let mut dk_prev = [0.0f64; 2]; // d k_prev[v] / d (x0, v0)
     let mut dku_prev = 0.0;
@@ -139,7 +140,6 @@ pub fn rk4_capsule<S: Spec<M, NX>, const M: usize, const NX: usize>(
         let dv = [ch * dk_prev[0], 1.0 + ch * dk_prev[1]];
         let dvu = ch * dku_prev;
         let (acc, slope) = drag.accel_and_slope(vs);
-        let (acc, slope) = (acc * drag_scale, slope * drag_scale);
         let kv = acc + g * u;
         let wh = W[stage] * h / 6.0;
         next[0] += wh * vs;
