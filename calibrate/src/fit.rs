@@ -73,27 +73,6 @@ pub struct Calibration {
     pub warnings: Vec<String>,
 }
 
-/// The drag coefficient of a law and the law with another coefficient.
-fn coefficient(d: &Drag) -> f64 {
-    match *d {
-        Drag::Quadratic { b_per_m } => b_per_m,
-        Drag::SphereCorrelation { k_per_m, .. } => k_per_m,
-    }
-}
-
-fn with_coefficient(d: &Drag, c: f64) -> Drag {
-    match *d {
-        Drag::Quadratic { .. } => Drag::Quadratic { b_per_m: c },
-        Drag::SphereCorrelation {
-            re_per_speed_s_per_m,
-            ..
-        } => Drag::SphereCorrelation {
-            k_per_m: c,
-            re_per_speed_s_per_m,
-        },
-    }
-}
-
 /// Positions of one capsule at every row of `log` from (x0, v0) at the
 /// first row, with gain `g` and drag `drag`.
 pub fn simulate_capsule(
@@ -140,8 +119,8 @@ struct CapsuleProblem<'a> {
 
 impl CapsuleProblem<'_> {
     fn residuals_at(&self, p: &DVector<f64>) -> DVector<f64> {
-        let c = coefficient(&self.drag_model) * p[1];
-        let drag = with_coefficient(&self.drag_model, c);
+        let c = self.drag_model.coefficient() * p[1];
+        let drag = self.drag_model.with_coefficient(c);
         let x = simulate_capsule(
             self.log,
             self.g_model * p[0],
@@ -247,7 +226,7 @@ pub fn fit(
             format!("{name}: the log does not identify the parameters (singular normal matrix)")
         })? * sigma2;
         let p = &problem.p;
-        let c_model = coefficient(&cap.drag);
+        let c_model = cap.drag.coefficient();
         let (gain, drag) = (cap.g * p[0], c_model * p[1]);
         let gain_stderr = cap.g * cov[(0, 0)].max(0.0).sqrt();
         let drag_stderr = c_model * cov[(1, 1)].max(0.0).sqrt();

@@ -47,6 +47,29 @@ impl Drag {
         }
     }
 
+    /// The law's coefficient: b (1/m) of the quadratic law, k (1/m) of the
+    /// sphere correlation.
+    pub fn coefficient(&self) -> f64 {
+        match *self {
+            Drag::Quadratic { b_per_m } => b_per_m,
+            Drag::SphereCorrelation { k_per_m, .. } => k_per_m,
+        }
+    }
+
+    /// The same law with coefficient `c` (1/m).
+    pub fn with_coefficient(&self, c: f64) -> Drag {
+        match *self {
+            Drag::Quadratic { .. } => Drag::Quadratic { b_per_m: c },
+            Drag::SphereCorrelation {
+                re_per_speed_s_per_m,
+                ..
+            } => Drag::SphereCorrelation {
+                k_per_m: c,
+                re_per_speed_s_per_m,
+            },
+        }
+    }
+
     /// Drag acceleration (m/s^2) at speed `v_m_per_s` and its derivative d a / d v (1/s).
     pub fn accel_and_slope(&self, v_m_per_s: f64) -> (f64, f64) {
         self.law().accel_and_slope(v_m_per_s)

@@ -9,9 +9,7 @@ use capsule_mpc_generator::config::{
 };
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{ControllerSettings, CycleOutput, Sampling as RtSampling};
-use capsule_mpc_runtime::{
-    Controller as RtController, DefaultController, RuntimeError, ThreeCapsuleController,
-};
+use capsule_mpc_runtime::{Controller as RtController, RuntimeError};
 use capsule_mpc_sim::closed_loop::Sampling;
 use capsule_mpc_sim::mismatch::PlantMismatch;
 use capsule_mpc_sim::plant::{disturbance_kind_from_name, DisturbanceLevel};
@@ -487,9 +485,5 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calibrate_json, m)?)?;
     m.add_function(wrap_pyfunction!(design_excitation_json, m)?)?;
     m.add("ConfigError", m.py().get_type::<ConfigError>())?;
-    let _ = (
-        DefaultController::default_settings,
-        ThreeCapsuleController::default_settings,
-    );
     Ok(())
 }

@@ -5,7 +5,7 @@
 //! than 10-20 %, so this is how a controller meets real capsules.
 
 use anyhow::{bail, Result};
-use capsule_mpc_generator::model::{Drag, Model};
+use capsule_mpc_generator::model::Model;
 use serde::{Deserialize, Serialize};
 
 /// Smallest and largest factor accepted: beyond these the "capsule" is
@@ -75,18 +75,7 @@ impl PlantMismatch {
         let mut plant = model.clone();
         for ((c, d), g) in plant.capsules.iter_mut().zip(drag).zip(gain) {
             c.g *= g;
-            c.drag = match c.drag {
-                Drag::Quadratic { b_per_m } => Drag::Quadratic {
-                    b_per_m: b_per_m * d,
-                },
-                Drag::SphereCorrelation {
-                    k_per_m,
-                    re_per_speed_s_per_m,
-                } => Drag::SphereCorrelation {
-                    k_per_m: k_per_m * d,
-                    re_per_speed_s_per_m,
-                },
-            };
+            c.drag = c.drag.with_coefficient(c.drag.coefficient() * d);
         }
         Ok(plant)
     }

@@ -158,6 +158,15 @@ impl Section {
         Section::GeneratorVersion,
     ];
     pub const COUNT: usize = Section::ALL.len();
+    /// The explicit tier's sections.
+    pub const EXPLICIT: [Section; 6] = [
+        Section::ExplicitSamples,
+        Section::ExplicitState,
+        Section::ExplicitIndexSlot,
+        Section::CoastedExplicitIndexSlot,
+        Section::FineExplicitSlot,
+        Section::CoastedFineExplicitSlot,
+    ];
 
     /// Position in `ALL` (and in the directory).
     pub const fn position(self) -> usize {

@@ -232,15 +232,8 @@ fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
 
 /// Bytes of the explicit tier's sections of the table file.
 fn explicit_table_bytes() -> usize {
-    [
-        Section::ExplicitSamples,
-        Section::ExplicitState,
-        Section::ExplicitIndexSlot,
-        Section::CoastedExplicitIndexSlot,
-        Section::FineExplicitSlot,
-        Section::CoastedFineExplicitSlot,
-    ]
-    .iter()
-    .map(|&s| TABLES.section_bytes(s).len())
-    .sum()
+    Section::EXPLICIT
+        .iter()
+        .map(|&s| TABLES.section_bytes(s).len())
+        .sum()
 }

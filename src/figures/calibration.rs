@@ -8,7 +8,7 @@ use anyhow::Result;
 use capsule_mpc_calibrate::fit::simulate_capsule;
 use capsule_mpc_calibrate::{Calibration, TrackingLog};
 use capsule_mpc_generator::config::Config;
-use capsule_mpc_generator::model::{Drag, Model};
+use capsule_mpc_generator::model::Model;
 use std::path::{Path, PathBuf};
 
 /// Draws `calibration.svg` / `.png` into `dir`.
@@ -25,16 +25,7 @@ pub fn plot_calibration(
         let mm = |xs: Vec<f64>| -> Vec<(f64, f64)> {
             t.iter().zip(xs).map(|(&t, x)| (t, 1e3 * x)).collect()
         };
-        let fitted_drag = match cap.drag {
-            Drag::Quadratic { .. } => Drag::Quadratic { b_per_m: fit.drag },
-            Drag::SphereCorrelation {
-                re_per_speed_s_per_m,
-                ..
-            } => Drag::SphereCorrelation {
-                k_per_m: fit.drag,
-                re_per_speed_s_per_m,
-            },
-        };
+        let fitted_drag = cap.drag.with_coefficient(fit.drag);
         let fitted = simulate_capsule(log, fit.gain, &fitted_drag, fit.x0_m, fit.v0_m_per_s, 1e-3);
         let nominal = simulate_capsule(log, cap.g, &cap.drag, fit.x0_m, fit.v0_m_per_s, 1e-3);
         let measured: Vec<(f64, f64)> = log.measurements(i).map(|(r, x)| (t[r], 1e3 * x)).collect();
