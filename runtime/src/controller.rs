@@ -1,7 +1,7 @@
 //! The scanner-cycle controller: estimator + generated solver + switching
 //! rule + fault handling, in one fixed-size struct.
 
-use crate::estimator::{CapsuleFilter, ScaleEstimate};
+use crate::estimator::CapsuleFilter;
 use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
     PaperConstants, TightInputs,
@@ -12,8 +12,10 @@ mod braking;
 mod checks;
 mod fusion;
 mod legs;
+mod mode;
 mod numeric;
 mod settings;
+mod state;
 mod station;
 mod status;
 mod tracking;
@@ -24,75 +26,20 @@ pub use checks::check_workspace;
 use checks::*;
 use numeric::*;
 pub use settings::*;
+pub use state::Mode;
+use state::{Estimation, LawMemory, Supervision};
 pub use station::*;
 pub use status::*;
 
-/// The closed loop's whole memory.
+/// The closed loop's whole memory: the solver (plan and workspace), the
+/// settings, and the state split by concern (see `state`).
 #[derive(Debug, Clone)]
 pub struct Controller<S: PlanSolver<NX, K>, const NX: usize, const K: usize> {
     solver: S,
     settings: ControllerSettings,
-    filters: [CapsuleFilter; NX],
-    /// Target of the current leg (the final target on the last leg, else
-    /// a waypoint), absolute SI.
-    target: [f64; NX],
-    /// Where the capsules are to end, absolute SI.
-    final_target: [f64; NX],
-    /// Whether the current leg ends at `final_target`.
-    on_last_leg: bool,
-    has_target: bool,
-    /// Plan samples applied since the last solve.
-    applied_samples: usize,
-    /// Last solver cost, for the decrease check (18).
-    last_cost: f64,
-    /// Inside the terminal hold set (see [`ControllerSettings`]).
-    holding: bool,
-    /// Samples per actuation phase the plan is refined for.
-    planned_phase_samples: usize,
-    /// Mean acceleration per unit gradient near rest, (m/s^2)/(T/m): fixed
-    /// by the model, computed once for the hold law.
-    mean_gain: f64,
-    /// Gated-out frames since the last accepted one (see
-    /// `ControllerSettings::reacquire_after_rejections`).
-    gated_rejections: usize,
-    /// Per capsule: how far (m) and how fast (m/s) it may have drifted
-    /// from the prediction since the last accepted frame because the model
-    /// is not the plant (see `accumulate_model_drift`).
-    model_drift: [[f64; 2]; NX],
-    /// Per capsule: the estimate of its gain and drag factors against the
-    /// model, and the factors in use (estimator and refinement; 1 until
-    /// the estimate differs from the model significantly).
-    scales: [ScaleEstimate; NX],
-    applied_scales: [[f64; 2]; NX],
-    /// Re-acquisition candidate: a filter started at the first gated-out
-    /// frame and updated with the gated-out frames that agree with it, so
-    /// that a re-acquired estimate has speeds from the frames.
-    candidate: [CapsuleFilter; NX],
-    /// Frames the candidate has absorbed (0: none).
-    candidate_frames: usize,
-    /// The estimate the last re-acquisition replaced, predicted along (see
-    /// `REPLACED_TRACK_MAX_STD_M`).
-    replaced: [CapsuleFilter; NX],
-    has_replaced: bool,
-    /// Frames accepted since the last `reset` or re-acquisition (see
-    /// `ControllerSettings::glitch_frames`).
-    confirmed_frames: usize,
-    /// The legs were re-planned after a fallback (`Recovering` until the
-    /// last leg).
-    recovering: bool,
-    /// End of the last actuation phase on the host's clock, s (`cycle_at`;
-    /// None before the first timed cycle, after `reset` and after `cycle`).
-    actuation_end_s: Option<f64>,
-    /// Running estimate of the zero-gradient gap between actuation phases
-    /// (tracking + delay), s: the coast the plans model.
-    gap_s: f64,
-    /// The hold's relative-position law (see `station`).
-    station: StationKeeper<NX>,
-    /// End-game progress (see `Controller::stalled`): the best (smallest)
-    /// largest error since the last progress, m, and the actuation time
-    /// since, s.
-    stall_best_m: f64,
-    stall_clock_s: f64,
+    est: Estimation<NX>,
+    sup: Supervision<NX>,
+    law: LawMemory<NX>,
 }
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
@@ -132,34 +79,19 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let mut c = Controller {
             solver: S::new(),
             settings,
-            filters: [CapsuleFilter::new(0.0, 0.0); NX],
-            target: [0.0; NX],
-            final_target: [0.0; NX],
-            on_last_leg: true,
-            has_target: false,
-            applied_samples: 0,
-            last_cost: f64::INFINITY,
-            holding: false,
-            planned_phase_samples: settings.max_actuation_samples,
-            mean_gain: mean_gradient_gain::<S, NX, K>(),
-            gated_rejections: 0,
-            model_drift: [[0.0; 2]; NX],
-            scales: [ScaleEstimate::new(
+            est: Estimation::new(
+                settings.wait_s(),
                 settings.model_gain_uncertainty,
                 settings.model_drag_uncertainty,
-            ); NX],
-            applied_scales: [[1.0, 1.0]; NX],
-            candidate: [CapsuleFilter::new(0.0, 0.0); NX],
-            candidate_frames: 0,
-            replaced: [CapsuleFilter::new(0.0, 0.0); NX],
-            has_replaced: false,
-            confirmed_frames: 0,
-            recovering: false,
-            actuation_end_s: None,
-            gap_s: settings.wait_s(),
-            station: StationKeeper::new(&capsule_drags::<S, NX, K>()),
-            stall_best_m: f64::INFINITY,
-            stall_clock_s: 0.0,
+            ),
+            sup: Supervision::new(),
+            law: LawMemory {
+                applied_samples: 0,
+                last_cost: f64::INFINITY,
+                planned_phase_samples: settings.max_actuation_samples,
+                mean_gain: mean_gradient_gain::<S, NX, K>(),
+                station: StationKeeper::new(&capsule_drags::<S, NX, K>()),
+            },
         };
         c.reset(positions_m)?;
         Ok(c)
@@ -179,28 +111,29 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         check_workspace::<S, NX, K>("positions_m", positions_m, 1)?;
         let std = self.settings.position_noise_m.max(1e-6);
         for (i, &p) in positions_m.iter().enumerate() {
-            self.filters[i] = CapsuleFilter::new(p, std);
+            self.est.filters[i] = CapsuleFilter::new(p, std);
         }
-        self.gated_rejections = 0;
-        self.model_drift = [[0.0; 2]; NX];
-        self.candidate_frames = 0;
-        self.has_replaced = false;
-        self.confirmed_frames = 0;
+        self.est.gated_rejections = 0;
+        self.est.model_drift = [[0.0; 2]; NX];
+        self.est.candidate_frames = 0;
+        self.est.has_replaced = false;
+        self.est.confirmed_frames = 0;
         // A new start: the host's clock restarts too.
-        self.actuation_end_s = None;
+        self.est.actuation_end_s = None;
         self.restart_plan();
+        self.sup.forget_mode();
         Ok(())
     }
 
-    /// Forgets the plan and the mode (new start state or new target).
+    /// Forgets the plan and the hold's memory (new start state, new target,
+    /// fallback).
     fn restart_plan(&mut self) {
         self.solver.reset();
-        self.applied_samples = 0;
-        self.last_cost = f64::INFINITY;
-        self.holding = false;
-        self.station.forget();
+        self.law.applied_samples = 0;
+        self.law.last_cost = f64::INFINITY;
+        self.law.station.forget();
         self.forget_stall();
-        self.planned_phase_samples = self.settings.max_actuation_samples;
+        self.law.planned_phase_samples = self.settings.max_actuation_samples;
         self.update_schedule();
     }
 
@@ -210,13 +143,18 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     fn update_schedule(&mut self) {
         let (samples, coast_s) = self
             .settings
-            .schedule_with_gap(self.planned_phase_samples, self.gap_s);
+            .schedule_with_gap(self.law.planned_phase_samples, self.est.gap_s);
         self.solver.set_schedule(samples, coast_s);
     }
 
     /// Whether the last cycle was in the terminal hold.
     pub fn holding(&self) -> bool {
-        self.holding
+        self.sup.mode == Mode::Hold
+    }
+
+    /// The mode of the last cycle (see [`Mode`]).
+    pub fn mode(&self) -> Mode {
+        self.sup.mode
     }
 
     pub fn settings(&self) -> &ControllerSettings {
@@ -236,33 +174,33 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     /// The final target, when set.
     pub fn target(&self) -> Option<&[f64; NX]> {
-        self.has_target.then_some(&self.final_target)
+        self.sup.has_target.then_some(&self.sup.final_target)
     }
 
     /// The current leg's target: the final target on the last leg, else the
     /// waypoint the capsules are heading for.
     pub fn leg_target(&self) -> Option<&[f64; NX]> {
-        self.has_target.then_some(&self.target)
+        self.sup.has_target.then_some(&self.sup.target)
     }
 
     /// Whether the current leg ends at the final target.
     pub fn on_last_leg(&self) -> bool {
-        self.on_last_leg
+        self.sup.on_last_leg
     }
 
     /// The current state estimate (absolute, SI).
     pub fn estimate(&self) -> [f64; NX] {
         let mut x = [0.0; NX];
         for i in 0..NX / 2 {
-            x[2 * i] = self.filters[i].mean[0];
-            x[2 * i + 1] = self.filters[i].mean[1];
+            x[2 * i] = self.est.filters[i].mean[0];
+            x[2 * i + 1] = self.est.filters[i].mean[1];
         }
         x
     }
 
     /// Position standard deviations of the estimate, m (first M entries).
     pub fn filter(&self, capsule: usize) -> Option<&CapsuleFilter> {
-        (capsule < NX / 2).then(|| &self.filters[capsule])
+        (capsule < NX / 2).then(|| &self.est.filters[capsule])
     }
 
     /// Sets a new target `[x1, v1, x2, v2, ...]`: positions inside the
@@ -280,11 +218,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         check_workspace::<S, NX, K>("target", target, 2)?;
         let x = self.estimate();
         let leg = Self::leg_from(&x, target).ok_or(RuntimeError::TargetOutOfRange)?;
-        self.final_target = *target;
-        self.has_target = true;
-        self.recovering = false;
+        self.sup.final_target = *target;
+        self.sup.has_target = true;
+        self.sup.recovering = false;
         self.apply_leg(&x, &leg);
         self.restart_plan();
+        self.sup.forget_mode();
         Ok(())
     }
 
@@ -313,12 +252,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             return Ok(self.plan_from(&kept, RuntimeStatus::MeasurementRejected, 1));
         }
         for i in 0..NX / 2 {
-            self.filters[i].mean = [x[2 * i], x[2 * i + 1]];
+            self.est.filters[i].mean = [x[2 * i], x[2 * i + 1]];
         }
-        self.gated_rejections = 0;
-        self.candidate_frames = 0;
-        self.has_replaced = false;
-        self.confirmed_frames = self.confirmed_frames.saturating_add(1);
+        self.est.gated_rejections = 0;
+        self.est.candidate_frames = 0;
+        self.est.has_replaced = false;
+        self.est.confirmed_frames = self.est.confirmed_frames.saturating_add(1);
         Ok(self.plan_from(x, RuntimeStatus::Ok, 1))
     }
 
@@ -336,11 +275,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         check_frame_length::<NX>(measured_positions_m)?;
         let wait_s = self.settings.wait_s();
         // No clock: a later `cycle_at` starts a new time base.
-        self.actuation_end_s = None;
+        self.est.actuation_end_s = None;
         Ok(self.step(measured_positions_m, 0.0, wait_s, (wait_s, false)))
     }
 
-    /// Solves from absolute state `x` and chooses the actuation length.
+    /// One cycle from absolute state `x`: the mode's transition, then
+    /// that mode's step.
     fn plan_from(&mut self, x: &[f64; NX], status: RuntimeStatus, n_max: usize) -> CycleOutput<K> {
         let mut out = CycleOutput {
             gradients_t_per_m: [0.0; K],
@@ -350,59 +290,85 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             estimate: [0.0; K2],
         };
         out.estimate[..NX].copy_from_slice(x);
-        if !self.has_target {
-            out.status = RuntimeStatus::NoTarget;
-            return out;
+        self.sup.mode = self.next_mode(x);
+        let e = self.relative(x, &self.sup.target);
+        match self.sup.mode {
+            Mode::NoTarget => out.status = RuntimeStatus::NoTarget,
+            Mode::Hold => self.hold_step(&e, &mut out),
+            Mode::Brake => self.brake_step(x, &mut out),
+            Mode::Plan | Mode::Fallback => {
+                let report = self.solve_step(&e);
+                out.solve = Some(report);
+                self.sup.mode = Mode::after_solve(&report);
+                if self.sup.mode == Mode::Fallback {
+                    self.fallback_step(x, &mut out);
+                } else {
+                    self.play_step(x, &e, &report, n_max, &mut out);
+                }
+            }
         }
-        self.advance_leg(x);
-        let e = self.relative(x, &self.target);
-        // Actuation time since the last cycle: progress is what the
-        // gradient achieves, whatever the tracking phases in between.
-        let since_s = self.applied_samples.max(1) as f64 * S::DT_S;
-        if self.on_last_leg && self.update_hold(&e) {
-            out.gradients_t_per_m[0] = self.hold_gradient(&e);
-            self.applied_samples = 0;
-            return out;
-        }
-        if self.on_last_leg && self.settings.refine != Refine::None && self.stalled(&e, since_s) {
-            // The refinement is swinging the group back and forth without
-            // closing the error (a local minimum of its quadratic cost):
-            // brake, and let the stored plan from rest take over.
-            out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
-            self.solver.reset();
-            self.applied_samples = 0;
-            return out;
-        }
-        self.solver.shift(self.applied_samples);
-        if self.creeping(&e) {
+        out
+    }
+
+    /// `Hold`: one sample of the hold law.
+    fn hold_step(&mut self, e: &[f64; NX], out: &mut CycleOutput<K>) {
+        out.gradients_t_per_m[0] = self.hold_gradient(e);
+        self.law.applied_samples = 0;
+    }
+
+    /// `Brake`: the refinement is swinging the group back and forth
+    /// without closing the error (a local minimum of its quadratic cost):
+    /// brake, and let the stored plan from rest take over.
+    fn brake_step(&mut self, x: &[f64; NX], out: &mut CycleOutput<K>) {
+        out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
+        self.solver.reset();
+        self.law.applied_samples = 0;
+    }
+
+    /// `Plan`, first half: shift the plan by what was played, restart it
+    /// from the tables when creeping, and refine it from `e`.
+    fn solve_step(&mut self, e: &[f64; NX]) -> SolveReport {
+        self.solver.shift(self.law.applied_samples);
+        if self.creeping(e) {
             // Nearly at rest and still away from the target: the stored
             // minimum-time plan from here is the best start; a refined plan
             // that creeps on the quadratic cost can take seconds.
             self.solver.reset();
         }
-        let report = self.refine_plan(&e);
-        out.solve = Some(report);
-        if report.status == SolveStatus::OutOfRange {
-            out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
-            out.status = RuntimeStatus::Fallback;
-            self.applied_samples = 0;
-            // No plan: the next cycle looks the (braked) state up again;
-            // once at rest (and only while frames agree with the
-            // estimate, which may be wrong), the legs are re-planned from
-            // here and reported as `Recovering` until the last one.
-            self.restart_plan();
-            if at_rest(x) && self.gated_rejections == 0 && self.replan_legs(x) {
-                self.recovering = !self.on_last_leg;
-            }
-            return out;
+        self.refine_plan(e)
+    }
+
+    /// `Fallback`: no plan. The next cycle looks the (braked) state up
+    /// again; once at rest (and only while frames agree with the
+    /// estimate, which may be wrong), the legs are re-planned from here
+    /// and reported as `Recovering` until the last one.
+    fn fallback_step(&mut self, x: &[f64; NX], out: &mut CycleOutput<K>) {
+        out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
+        out.status = RuntimeStatus::Fallback;
+        self.law.applied_samples = 0;
+        self.restart_plan();
+        if at_rest(x) && self.est.gated_rejections == 0 && self.replan_legs(x) {
+            self.sup.recovering = !self.sup.on_last_leg;
         }
-        if self.recovering && out.status == RuntimeStatus::Ok {
+    }
+
+    /// `Plan`, second half: report the solve's status, play the plan and
+    /// choose the actuation length.
+    fn play_step(
+        &mut self,
+        x: &[f64; NX],
+        e: &[f64; NX],
+        report: &SolveReport,
+        n_max: usize,
+        out: &mut CycleOutput<K>,
+    ) {
+        if self.sup.recovering && out.status == RuntimeStatus::Ok {
             out.status = RuntimeStatus::Recovering;
         }
         if report.status == SolveStatus::IterationLimit && out.status == RuntimeStatus::Ok {
             out.status = RuntimeStatus::IterationLimit;
         }
-        let measured = S::qp_iterations_measured(&e);
+        let measured = S::qp_iterations_measured(e);
         if measured > 0 && report.max_qp_iterations > measured && out.status == RuntimeStatus::Ok {
             out.status = RuntimeStatus::AboveIterationMap;
         }
@@ -428,19 +394,18 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let n = if n_max <= 1 {
             1
         } else {
-            self.actuation_length(&e, n_max.min(S::N))
+            self.actuation_length(e, n_max.min(S::N))
         };
         out.actuation_samples = n;
-        self.applied_samples = n;
-        self.last_cost = report.cost;
+        self.law.applied_samples = n;
+        self.law.last_cost = report.cost;
         if self.settings.sampling == Sampling::Variable {
             // Model (and refine for) the next phase as long as this one:
             // phase lengths change slowly, so the model stays close to what
             // plays.
-            self.planned_phase_samples = n;
+            self.law.planned_phase_samples = n;
             self.update_schedule();
         }
-        out
     }
 
     /// Refines the plan from `e`: one solve (SQP_ITERATIONS Gauss-Newton
@@ -462,7 +427,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let rounds = match (self.settings.refine, self.settings.sampling) {
             (Refine::None, _) => 0,
             (Refine::Once, _) => 1,
-            (Refine::PerSample, Sampling::Variable) => self.planned_phase_samples.max(1),
+            (Refine::PerSample, Sampling::Variable) => self.law.planned_phase_samples.max(1),
             (Refine::PerSample, Sampling::Ideal | Sampling::Constant) => 1,
         };
         let explicit = if S::HAS_EXPLICIT_TIER {
@@ -519,16 +484,16 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let s = &self.settings;
         let slow = |speed: f64| (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= speed);
         let centre_m = libm::fabs(capsule_centre_m(e));
-        let was = self.holding;
+        let was = self.sup.mode == Mode::Hold;
         let spread_m = half_spread_m(e, 0.0);
         let outside = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > s.hold_release_position_m);
-        self.holding = if was {
+        let holding = if was {
             slow(s.hold_release_speed_m_per_s)
                 && spread_m <= s.hold_release_position_m
                 && !(NX / 2 <= HOLD_EARLY_EXIT_MAX_CAPSULES
                     && outside
                     && spread_m > HOLD_SPREAD_EXIT_M
-                    && self.station.held_s() >= HOLD_SETTLING_S)
+                    && self.law.station.held_s() >= HOLD_SETTLING_S)
                 && centre_m <= HOLD_CENTRE_RELEASE_M
         } else {
             slow(s.hold_enter_speed_m_per_s)
@@ -536,18 +501,18 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
                 && centre_m <= HOLD_CENTRE_ENTER_M
         };
-        if !was && self.holding {
-            self.station.start();
+        if !was && holding {
+            self.law.station.start();
             // The end game's progress restarts when the hold ends.
             self.forget_stall();
         }
-        if was && !self.holding {
+        if was && !holding {
             // Re-plan from the tables, not from the plan before the hold.
             self.solver.reset();
-            self.planned_phase_samples = self.settings.max_actuation_samples;
+            self.law.planned_phase_samples = self.settings.max_actuation_samples;
             self.update_schedule();
         }
-        self.holding
+        holding
     }
 
     /// The hold law: critically damped PD on the group's centre (position)
@@ -558,13 +523,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     fn hold_gradient(&mut self, e: &[f64; NX]) -> f64 {
         let (_, mean_v) = capsule_means(e);
         let centre_m = capsule_centre_m(e);
-        let mean_g = self.mean_gain;
+        let mean_g = self.law.mean_gain;
         if mean_g.is_nan() || mean_g <= 0.0 {
             return 0.0;
         }
         let w = HOLD_NATURAL_FREQUENCY_RAD_PER_S;
         let gap_s = self.hold_gap_s();
-        let (dither_m, dither_m_per_s) = self.station.common(S::DT_S, gap_s);
+        let (dither_m, dither_m_per_s) = self.law.station.common(S::DT_S, gap_s);
         let mut fastest_m_per_s: f64 = 0.0;
         for i in 0..NX / 2 {
             fastest_m_per_s = fastest_m_per_s.max(libm::fabs(e[2 * i + 1] - dither_m_per_s));
@@ -573,7 +538,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             STATION_SPEED_BUDGET_M_PER_S - fastest_m_per_s - w * libm::fabs(centre_m - dither_m);
         let position_room_m =
             STATION_POSITION_BUDGET_M - half_spread_m(e, 0.0) - libm::fabs(centre_m - dither_m);
-        let dither_accel = self.station.next_acceleration(
+        let dither_accel = self.law.station.next_acceleration(
             e,
             S::DT_S,
             gap_s,
@@ -608,13 +573,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.forget_stall();
             return false;
         }
-        if largest_m < STALL_PROGRESS * self.stall_best_m {
-            self.stall_best_m = largest_m;
-            self.stall_clock_s = 0.0;
+        if largest_m < STALL_PROGRESS * self.sup.stall_best_m {
+            self.sup.stall_best_m = largest_m;
+            self.sup.stall_clock_s = 0.0;
             return false;
         }
-        self.stall_clock_s += since_s;
-        if self.stall_clock_s < STALL_S {
+        self.sup.stall_clock_s += since_s;
+        if self.sup.stall_clock_s < STALL_S {
             return false;
         }
         self.forget_stall();
@@ -622,15 +587,15 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     fn forget_stall(&mut self) {
-        self.stall_best_m = f64::INFINITY;
-        self.stall_clock_s = 0.0;
+        self.sup.stall_best_m = f64::INFINITY;
+        self.sup.stall_clock_s = 0.0;
     }
 
     /// The zero-gradient gap after each hold sample, s.
     fn hold_gap_s(&self) -> f64 {
         match self.settings.sampling {
             Sampling::Ideal => 0.0,
-            Sampling::Constant | Sampling::Variable => self.gap_s,
+            Sampling::Constant | Sampling::Variable => self.est.gap_s,
         }
     }
 
@@ -652,7 +617,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
         // The estimate's 3-sigma box per capsule, propagated along the plan.
         let mut start = [[0.0; 2]; K2];
-        for (b, f) in start.iter_mut().zip(&self.filters) {
+        for (b, f) in start.iter_mut().zip(&self.est.filters) {
             *b = [3.0 * f.position_std_m(), 3.0 * f.speed_std_m_per_s()];
         }
         let mut boxes = start;

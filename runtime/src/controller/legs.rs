@@ -30,16 +30,16 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     /// Heads for the end of `leg`, starting from `x`.
     pub(super) fn apply_leg(&mut self, x: &[f64; NX], leg: &Leg<NX>) {
-        self.on_last_leg = leg.last;
+        self.sup.on_last_leg = leg.last;
         if leg.last {
-            self.recovering = false;
+            self.sup.recovering = false;
         }
         if leg.last {
-            self.target = self.final_target;
+            self.sup.target = self.sup.final_target;
         } else {
             for i in 0..NX / 2 {
-                self.target[2 * i] = x[2 * i] - leg.start_offset_m[2 * i];
-                self.target[2 * i + 1] = 0.0;
+                self.sup.target[2 * i] = x[2 * i] - leg.start_offset_m[2 * i];
+                self.sup.target[2 * i + 1] = 0.0;
             }
         }
     }
@@ -47,10 +47,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// On a waypoint leg: once the capsules are near the waypoint, nearly at
     /// rest, head for the next leg (true when the leg changed).
     pub(super) fn advance_leg(&mut self, x: &[f64; NX]) -> bool {
-        if self.on_last_leg {
+        if self.sup.on_last_leg {
             return false;
         }
-        let e = self.relative(x, &self.target);
+        let e = self.relative(x, &self.sup.target);
         let arrived = (0..NX / 2).all(|i| {
             libm::fabs(e[2 * i]) <= WAYPOINT_POSITION_M
                 && libm::fabs(e[2 * i + 1]) <= WAYPOINT_SPEED_M_PER_S
@@ -64,7 +64,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// Re-plans the legs from the capsules' positions in `x` (true when a
     /// chain exists; else the current leg is kept).
     pub(super) fn replan_legs(&mut self, x: &[f64; NX]) -> bool {
-        match Self::leg_from(x, &self.final_target) {
+        match Self::leg_from(x, &self.sup.final_target) {
             Some(leg) => {
                 self.apply_leg(x, &leg);
                 self.restart_plan();

@@ -36,16 +36,17 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     ) -> Result<CycleOutput<K>, RuntimeError> {
         check_frame_length::<NX>(measured_positions_m)?;
         let (before_s, wait_s, gap_s) = self.check_times(t_measured_s, t_actuation_start_s)?;
-        let first = self.actuation_end_s.is_none();
+        let first = self.est.actuation_end_s.is_none();
         let out = self.step(measured_positions_m, before_s, wait_s, (gap_s, first));
-        self.actuation_end_s = Some(t_actuation_start_s + out.actuation_samples as f64 * S::DT_S);
+        self.est.actuation_end_s =
+            Some(t_actuation_start_s + out.actuation_samples as f64 * S::DT_S);
         Ok(out)
     }
 
     /// End of the last actuation phase on the host's clock (the instant
     /// `estimate()` describes after a `cycle_at`), s.
     pub fn actuation_end_s(&self) -> Option<f64> {
-        self.actuation_end_s
+        self.est.actuation_end_s
     }
 
     /// Checks a measurement time against the end of the previous actuation
@@ -55,7 +56,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         if !t_measured_s.is_finite() {
             return Err(RuntimeError::NonFinite("t_measured_s"));
         }
-        match self.actuation_end_s {
+        match self.est.actuation_end_s {
             None => Ok(0.0),
             Some(end_s) => {
                 if t_measured_s < end_s - TIME_TOLERANCE_S {
@@ -139,10 +140,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let next = if first {
             gap_s
         } else {
-            self.gap_s + GAP_SMOOTHING * (gap_s - self.gap_s)
+            self.est.gap_s + GAP_SMOOTHING * (gap_s - self.est.gap_s)
         };
-        if next != self.gap_s {
-            self.gap_s = next;
+        if next != self.est.gap_s {
+            self.est.gap_s = next;
             self.update_schedule();
         }
     }
@@ -162,45 +163,48 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             Measurement::Invalid => RuntimeStatus::MeasurementRejected,
             Measurement::Accepted => {
                 self.settle_model_drift();
-                self.gated_rejections = 0;
-                self.candidate_frames = 0;
-                self.confirmed_frames = self.confirmed_frames.saturating_add(1);
+                self.est.gated_rejections = 0;
+                self.est.candidate_frames = 0;
+                self.est.confirmed_frames = self.est.confirmed_frames.saturating_add(1);
                 let m = NX / 2;
-                if !self.has_replaced && nis(&self.filters[..m], z, r) > REPLACED_TRACK_NIS {
+                if !self.est.has_replaced && nis(&self.est.filters[..m], z, r) > REPLACED_TRACK_NIS
+                {
                     // A frame that pulls the estimate far (behind a gate
                     // widened by long open-loop phases) may be the first of
                     // a glitch: keep the estimate it pulls away from.
-                    self.replaced = self.filters;
-                    self.has_replaced = true;
+                    self.est.replaced = self.est.filters;
+                    self.est.has_replaced = true;
                 }
                 self.update_scales(z, r);
-                update_filters(&mut self.filters[..m], z, r);
+                update_filters(&mut self.est.filters[..m], z, r);
                 self.refresh_applied_scales();
                 RuntimeStatus::Ok
             }
             Measurement::GatedOut => {
-                if self.has_replaced && nis(&self.replaced[..NX / 2], z, r) <= REPLACED_TRACK_NIS {
+                if self.est.has_replaced
+                    && nis(&self.est.replaced[..NX / 2], z, r) <= REPLACED_TRACK_NIS
+                {
                     // The frames are back on the track the last
                     // re-acquisition replaced: that one was a glitch.
-                    self.filters = self.replaced;
-                    self.has_replaced = false;
-                    update_filters(&mut self.filters[..NX / 2], z, r);
+                    self.est.filters = self.est.replaced;
+                    self.est.has_replaced = false;
+                    update_filters(&mut self.est.filters[..NX / 2], z, r);
                     self.after_reacquisition();
-                    self.confirmed_frames = 1;
+                    self.est.confirmed_frames = 1;
                     return RuntimeStatus::Reacquired;
                 }
-                self.gated_rejections = self.gated_rejections.saturating_add(1);
+                self.est.gated_rejections = self.est.gated_rejections.saturating_add(1);
                 self.track_candidate(z, r);
                 let after = self.settings.reacquire_after_rejections;
-                let needed = if self.confirmed_frames >= ESTABLISHED_AFTER_FRAMES {
+                let needed = if self.est.confirmed_frames >= ESTABLISHED_AFTER_FRAMES {
                     after.max(self.settings.glitch_frames.saturating_add(1))
                 } else {
                     after
                 };
-                if after != 0 && self.candidate_frames >= needed {
-                    self.replaced = self.filters;
-                    self.has_replaced = true;
-                    self.filters = self.candidate;
+                if after != 0 && self.est.candidate_frames >= needed {
+                    self.est.replaced = self.est.filters;
+                    self.est.has_replaced = true;
+                    self.est.filters = self.est.candidate;
                     self.after_reacquisition();
                     RuntimeStatus::Reacquired
                 } else {
@@ -215,9 +219,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// fits it better than the estimate.
     pub(super) fn continues_candidate(&self, z: &[f64], r: f64) -> bool {
         let m = NX / 2;
-        self.candidate_frames >= 2
-            && within_gate(&self.candidate[..m], z, r)
-            && nis(&self.candidate[..m], z, r) < nis(&self.filters[..m], z, r)
+        self.est.candidate_frames >= 2
+            && within_gate(&self.est.candidate[..m], z, r)
+            && nis(&self.est.candidate[..m], z, r) < nis(&self.est.filters[..m], z, r)
     }
 
     /// Feeds a gated-out frame to the re-acquisition candidate: fused when
@@ -226,26 +230,26 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// that the next frame sets the speed).
     pub(super) fn track_candidate(&mut self, z: &[f64], r: f64) {
         let m = NX / 2;
-        if self.candidate_frames > 0 && within_gate(&self.candidate[..m], z, r) {
-            update_filters(&mut self.candidate[..m], z, r);
-            self.candidate_frames += 1;
+        if self.est.candidate_frames > 0 && within_gate(&self.est.candidate[..m], z, r) {
+            update_filters(&mut self.est.candidate[..m], z, r);
+            self.est.candidate_frames += 1;
         } else {
             let std = self.settings.position_noise_m.max(1e-6);
-            for (c, &p) in self.candidate.iter_mut().zip(z) {
+            for (c, &p) in self.est.candidate.iter_mut().zip(z) {
                 *c = CapsuleFilter::with_speed_std(p, std, REACQUIRE_SPEED_STD_M_PER_S);
             }
-            self.candidate_frames = 1;
+            self.est.candidate_frames = 1;
         }
     }
 
     /// The estimate jumped (re-acquired): forget the counters and the plan.
     pub(super) fn after_reacquisition(&mut self) {
-        self.model_drift = [[0.0; 2]; NX];
-        self.gated_rejections = 0;
-        self.candidate_frames = 0;
-        self.confirmed_frames = 0;
+        self.est.model_drift = [[0.0; 2]; NX];
+        self.est.gated_rejections = 0;
+        self.est.candidate_frames = 0;
+        self.est.confirmed_frames = 0;
         // A leg chosen from the old estimate means nothing now.
-        if self.has_target {
+        if self.sup.has_target {
             let x = self.estimate();
             self.replan_legs(&x);
         }
@@ -268,10 +272,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         );
         let t = duration_s;
         for i in 0..NX / 2 {
-            let v = self.filters[i].mean[1];
+            let v = self.est.filters[i].mean[1];
             let accel_err = gain_err * libm::fabs(S::capsule_gain(i) * u)
                 + drag_err * libm::fabs(S::capsule_drag(i, v));
-            let d = &mut self.model_drift[i];
+            let d = &mut self.est.model_drift[i];
             d[0] = (d[0] + d[1] * t + 0.5 * accel_err * t * t).min(MODEL_DRIFT_MAX_M);
             d[1] += accel_err * t;
         }
@@ -281,11 +285,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// kinematic update, whose innovation they regress).
     pub(super) fn update_scales(&mut self, z: &[f64], r: f64) {
         for (i, &zi) in z.iter().enumerate().take(NX / 2) {
-            let f = self.filters[i];
+            let f = self.est.filters[i];
             let s = f.cov[0] + r;
             let innovation = zi - f.mean[0];
-            self.scales[i].update(innovation, s, self.applied_scales[i]);
-            self.scales[i].after_kinematic_update([f.cov[0] / s, f.cov[2] / s]);
+            self.est.scales[i].update(innovation, s, self.est.applied_scales[i]);
+            self.est.scales[i].after_kinematic_update([f.cov[0] / s, f.cov[2] / s]);
         }
     }
 
@@ -296,26 +300,27 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     pub(super) fn refresh_applied_scales(&mut self) {
         let mut changed = false;
         for i in 0..NX / 2 {
-            let new = self.scales[i].significant(SCALE_SIGNIFICANCE);
-            let old = self.applied_scales[i];
+            let new = self.est.scales[i].significant(SCALE_SIGNIFICANCE);
+            let old = self.est.applied_scales[i];
             if new != old {
-                let sens = self.scales[i].sens;
+                let sens = self.est.scales[i].sens;
                 let d = [new[0] - old[0], new[1] - old[1]];
-                self.filters[i].mean[0] += sens[0] * d[0] + sens[1] * d[1];
-                self.filters[i].mean[1] += sens[2] * d[0] + sens[3] * d[1];
-                self.applied_scales[i] = new;
+                self.est.filters[i].mean[0] += sens[0] * d[0] + sens[1] * d[1];
+                self.est.filters[i].mean[1] += sens[2] * d[0] + sens[3] * d[1];
+                self.est.applied_scales[i] = new;
                 changed = true;
             }
         }
         if changed {
-            self.solver.set_model_scales(&self.applied_scales[..NX / 2]);
+            self.solver
+                .set_model_scales(&self.est.applied_scales[..NX / 2]);
         }
     }
 
     /// An accepted frame corrects the position drift at once and the speed
     /// drift over a few frames (`MODEL_DRIFT_SPEED_KEPT`).
     pub(super) fn settle_model_drift(&mut self) {
-        for d in self.model_drift[..NX / 2].iter_mut() {
+        for d in self.est.model_drift[..NX / 2].iter_mut() {
             d[0] = 0.0;
             d[1] *= MODEL_DRIFT_SPEED_KEPT;
         }
@@ -331,7 +336,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             return Measurement::Invalid;
         }
         let r = sq(self.settings.position_noise_m.max(1e-6));
-        if within_widened_gate(&self.filters[..NX / 2], z, r, &self.model_drift[..NX / 2]) {
+        if within_widened_gate(
+            &self.est.filters[..NX / 2],
+            z,
+            r,
+            &self.est.model_drift[..NX / 2],
+        ) {
             Measurement::Accepted
         } else {
             Measurement::GatedOut
@@ -345,7 +355,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // A disturbance of bound gamma, read as white noise over one sample.
         let accel_psd = (gamma * gamma * S::DT_S).max(MIN_ACCEL_PSD);
         let vel_psd = gamma * gamma * S::DT_S;
-        let applied = self.applied_scales;
+        let applied = self.est.applied_scales;
         let predict = |filters: &mut [CapsuleFilter]| {
             for (i, f) in filters.iter_mut().enumerate() {
                 let (next, a) = S::capsule_transition_scaled(i, f.mean, u, duration_s, applied[i]);
@@ -356,7 +366,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.accumulate_model_drift(u, duration_s);
         // The factors' sensitivities, by differences of the same step.
         for (i, &s) in applied.iter().enumerate().take(m) {
-            let f = self.filters[i];
+            let f = self.est.filters[i];
             let (base, a) = S::capsule_transition_scaled(i, f.mean, u, duration_s, s);
             let (g, _) =
                 S::capsule_transition_scaled(i, f.mean, u, duration_s, [s[0] + SCALE_STEP, s[1]]);
@@ -368,15 +378,15 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 (g[1] - base[1]) / SCALE_STEP,
                 (d[1] - base[1]) / SCALE_STEP,
             ];
-            self.scales[i].predict(a, b, duration_s);
+            self.est.scales[i].predict(a, b, duration_s);
         }
-        predict(&mut self.filters[..m]);
-        if self.candidate_frames > 0 {
-            predict(&mut self.candidate[..m]);
+        predict(&mut self.est.filters[..m]);
+        if self.est.candidate_frames > 0 {
+            predict(&mut self.est.candidate[..m]);
         }
-        if self.has_replaced {
-            predict(&mut self.replaced[..m]);
-            self.has_replaced = self.replaced[..m]
+        if self.est.has_replaced {
+            predict(&mut self.est.replaced[..m]);
+            self.est.has_replaced = self.est.replaced[..m]
                 .iter()
                 .all(|f| f.position_std_m() <= REPLACED_TRACK_MAX_STD_M);
         }

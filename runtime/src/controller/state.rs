@@ -1,0 +1,147 @@
+//! The controller's memory, split by concern: what the frames say
+//! (`Estimation`), where to go and in which mode (`Supervision`), and what
+//! the law carries from one cycle to the next (`LawMemory`). The mode
+//! enum lives here too; its transitions are in `mode`.
+
+use super::StationKeeper;
+use crate::estimator::{CapsuleFilter, ScaleEstimate};
+
+/// What a cycle does. Decided in one place (`Controller::next_mode`, then
+/// `Mode::after_solve`); each mode's step is one call in `plan_from`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// No target set: zero gradient, status `NoTarget`.
+    NoTarget,
+    /// Terminal hold: nearly at rest at the target; the hold law
+    /// (centre PD plus station-keeping dither) keeps the capsules there.
+    Hold,
+    /// The end game stalled (`Controller::stalled`): one braking sample,
+    /// then the stored plan from rest takes over.
+    Brake,
+    /// Following a plan: the explicit tier, then the refinement.
+    Plan,
+    /// No stored plan covers the state: braking, and the legs are
+    /// re-planned once the capsules are at rest.
+    Fallback,
+}
+
+/// The state estimate and the frame gate's memory.
+#[derive(Debug, Clone)]
+pub(super) struct Estimation<const NX: usize> {
+    /// One position/speed filter per capsule (first M entries).
+    pub filters: [CapsuleFilter; NX],
+    /// Gated-out frames since the last accepted one (see
+    /// `ControllerSettings::reacquire_after_rejections`).
+    pub gated_rejections: usize,
+    /// Per capsule: how far (m) and how fast (m/s) it may have drifted
+    /// from the prediction since the last accepted frame because the model
+    /// is not the plant (see `accumulate_model_drift`).
+    pub model_drift: [[f64; 2]; NX],
+    /// Per capsule: the estimate of its gain and drag factors against the
+    /// model, and the factors in use (estimator and refinement; 1 until
+    /// the estimate differs from the model significantly).
+    pub scales: [ScaleEstimate; NX],
+    pub applied_scales: [[f64; 2]; NX],
+    /// Re-acquisition candidate: a filter started at the first gated-out
+    /// frame and updated with the gated-out frames that agree with it, so
+    /// that a re-acquired estimate has speeds from the frames.
+    pub candidate: [CapsuleFilter; NX],
+    /// Frames the candidate has absorbed (0: none).
+    pub candidate_frames: usize,
+    /// The estimate the last re-acquisition replaced, predicted along (see
+    /// `REPLACED_TRACK_MAX_STD_M`).
+    pub replaced: [CapsuleFilter; NX],
+    pub has_replaced: bool,
+    /// Frames accepted since the last `reset` or re-acquisition (see
+    /// `ControllerSettings::glitch_frames`).
+    pub confirmed_frames: usize,
+    /// End of the last actuation phase on the host's clock, s (`cycle_at`;
+    /// None before the first timed cycle, after `reset` and after `cycle`).
+    pub actuation_end_s: Option<f64>,
+    /// Running estimate of the zero-gradient gap between actuation phases
+    /// (tracking + delay), s: the coast the plans model.
+    pub gap_s: f64,
+}
+
+impl<const NX: usize> Estimation<NX> {
+    pub fn new(gap_s: f64, gain_uncertainty: f64, drag_uncertainty: f64) -> Self {
+        Estimation {
+            filters: [CapsuleFilter::new(0.0, 0.0); NX],
+            gated_rejections: 0,
+            model_drift: [[0.0; 2]; NX],
+            scales: [ScaleEstimate::new(gain_uncertainty, drag_uncertainty); NX],
+            applied_scales: [[1.0, 1.0]; NX],
+            candidate: [CapsuleFilter::new(0.0, 0.0); NX],
+            candidate_frames: 0,
+            replaced: [CapsuleFilter::new(0.0, 0.0); NX],
+            has_replaced: false,
+            confirmed_frames: 0,
+            actuation_end_s: None,
+            gap_s,
+        }
+    }
+}
+
+/// Where the capsules are to go, by which legs, and in which mode.
+#[derive(Debug, Clone)]
+pub(super) struct Supervision<const NX: usize> {
+    /// Target of the current leg (the final target on the last leg, else
+    /// a waypoint), absolute SI.
+    pub target: [f64; NX],
+    /// Where the capsules are to end, absolute SI.
+    pub final_target: [f64; NX],
+    /// Whether the current leg ends at `final_target`.
+    pub on_last_leg: bool,
+    pub has_target: bool,
+    /// The legs were re-planned after a fallback (`Recovering` until the
+    /// last leg).
+    pub recovering: bool,
+    /// The mode of the last cycle.
+    pub mode: Mode,
+    /// End-game progress (see `Controller::stalled`): the best (smallest)
+    /// largest error since the last progress, m, and the actuation time
+    /// since, s.
+    pub stall_best_m: f64,
+    pub stall_clock_s: f64,
+}
+
+impl<const NX: usize> Supervision<NX> {
+    pub fn new() -> Self {
+        Supervision {
+            target: [0.0; NX],
+            final_target: [0.0; NX],
+            on_last_leg: true,
+            has_target: false,
+            recovering: false,
+            mode: Mode::NoTarget,
+            stall_best_m: f64::INFINITY,
+            stall_clock_s: 0.0,
+        }
+    }
+
+    /// A new start or target: the next cycle decides the mode afresh
+    /// (in particular, not in the hold).
+    pub fn forget_mode(&mut self) {
+        self.mode = if self.has_target {
+            Mode::Plan
+        } else {
+            Mode::NoTarget
+        };
+    }
+}
+
+/// What the law carries between cycles besides the solver's plan.
+#[derive(Debug, Clone)]
+pub(super) struct LawMemory<const NX: usize> {
+    /// Plan samples applied since the last solve.
+    pub applied_samples: usize,
+    /// Last solver cost, for the decrease check (18).
+    pub last_cost: f64,
+    /// Samples per actuation phase the plan is refined for.
+    pub planned_phase_samples: usize,
+    /// Mean acceleration per unit gradient near rest, (m/s^2)/(T/m): fixed
+    /// by the model, computed once for the hold law.
+    pub mean_gain: f64,
+    /// The hold's relative-position law (see `station`).
+    pub station: StationKeeper<NX>,
+}

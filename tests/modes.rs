@@ -1,0 +1,82 @@
+//! The controller's mode machine (`Mode`, issue 26 item 4): which mode a
+//! cycle is in, on the exact model under ideal sampling.
+
+use capsule_mpc_runtime::controller::{Mode, Sampling};
+use capsule_mpc_runtime::generated::controller::spec::{K, M, NX};
+use capsule_mpc_runtime::generated::controller::Solver;
+use capsule_mpc_runtime::solver::PlanSolver;
+use capsule_mpc_runtime::{DefaultController, RuntimeStatus};
+
+const A: [f64; NX] = [0.02, 0.0, 0.03, 0.0];
+const C: [f64; NX] = [0.02, 0.0, -0.01, 0.0];
+const DT_S: f64 = <Solver as PlanSolver<NX, K>>::DT_S;
+
+fn controller() -> DefaultController {
+    let mut s = DefaultController::default_settings();
+    s.sampling = Sampling::Ideal;
+    DefaultController::new(s, &[0.0; M]).unwrap()
+}
+
+/// The modes of `steps` ideal cycles from rest at the origin, the plant
+/// being the solver's own model.
+fn modes_to(c: &mut DefaultController, target: &[f64; NX], steps: usize) -> (Vec<Mode>, [f64; NX]) {
+    c.set_target(target).unwrap();
+    let mut x = c.estimate();
+    let mut modes = Vec::new();
+    for _ in 0..steps {
+        let out = c.cycle_full_state(&x).unwrap();
+        modes.push(c.mode());
+        x = <Solver as PlanSolver<NX, K>>::predict_constant(&x, out.gradients_t_per_m[0], DT_S);
+    }
+    (modes, x)
+}
+
+#[test]
+fn without_a_target_the_mode_is_no_target() {
+    let mut c = controller();
+    let out = c.cycle_full_state(&[0.0; NX]).unwrap();
+    assert_eq!(out.status, RuntimeStatus::NoTarget);
+    assert_eq!(c.mode(), Mode::NoTarget);
+    assert_eq!(out.gradients_t_per_m[0], 0.0);
+}
+
+/// A reached target: plan, then hold for good (no fallback, no hold
+/// before arrival), and the hold is where the capsules are at the target.
+#[test]
+fn a_reached_target_ends_in_the_hold_and_a_new_target_leaves_it() {
+    let mut c = controller();
+    for target in [A, C] {
+        let (modes, x) = modes_to(&mut c, &target, 100);
+        assert!(!modes.contains(&Mode::Fallback), "{target:?}: {modes:?}");
+        let first_hold = modes.iter().position(|&m| m == Mode::Hold).expect("holds");
+        assert!(
+            modes[..first_hold]
+                .iter()
+                .all(|&m| m == Mode::Plan || m == Mode::Brake),
+            "{target:?}: {modes:?}"
+        );
+        assert!(
+            modes[first_hold..].iter().all(|&m| m == Mode::Hold),
+            "{target:?}: {modes:?}"
+        );
+        assert!(c.holding());
+        for i in 0..M {
+            assert!(
+                (x[2 * i] - target[2 * i]).abs() <= 1e-3,
+                "{target:?}: {x:?}"
+            );
+        }
+        c.reset(&[0.0; M]).unwrap();
+        assert_eq!(c.mode(), Mode::Plan, "a reset leaves the hold");
+        assert!(!c.holding());
+    }
+}
+
+#[test]
+fn a_state_no_plan_covers_falls_back() {
+    let mut c = controller();
+    c.set_target(&A).unwrap();
+    let out = c.cycle_full_state(&[A[0], 0.9, A[2], 0.9]).unwrap();
+    assert_eq!(out.status, RuntimeStatus::Fallback);
+    assert_eq!(c.mode(), Mode::Fallback);
+}
