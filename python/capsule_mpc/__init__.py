@@ -203,7 +203,8 @@ def simulate(
 class ReachMap:
     """Every target of a grid: ``targets_m`` (P, M), ``settle_time_s``,
     ``min_time_bound_s`` and ``ratio`` (P,) with NaN where refused or never
-    settled, and for two capsules the same as grids (``grid_*``, first
+    settled, ``schedule_min_time_s`` and ``schedule_ratio`` against the
+    played schedule's minimum time (constant sampling: the coasted plan), and for two capsules the same as grids (``grid_*``, first
     capsule's position along axis 0); ``summary`` is the CLI's."""
 
     def __init__(self, text: str, axis_cm: np.ndarray):
@@ -217,6 +218,8 @@ class ReachMap:
         self.settle_time_s = np.asarray([val(p, "settle_time_s") for p in pts])
         self.min_time_bound_s = np.asarray([val(p, "min_time_bound_s") for p in pts])
         self.ratio = np.asarray([val(p, "settle_over_bound") for p in pts])
+        self.schedule_min_time_s = np.asarray([val(p, "schedule_min_time_s") for p in pts])
+        self.schedule_ratio = np.asarray([val(p, "settle_over_schedule_bound") for p in pts])
         self.axis_m = axis_cm / 100.0
         if self.targets_m.shape[1:] == (2,):
             n = len(self.axis_m)

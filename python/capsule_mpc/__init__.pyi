@@ -67,6 +67,8 @@ class ReachMap:
     settle_time_s: np.ndarray
     min_time_bound_s: np.ndarray
     ratio: np.ndarray
+    schedule_min_time_s: np.ndarray
+    schedule_ratio: np.ndarray
     axis_m: np.ndarray
     grid_settle_time_s: np.ndarray
     grid_min_time_bound_s: np.ndarray

@@ -217,3 +217,11 @@ def test_calibrate_refuses_a_malformed_log(tmp_path):
     p.write_text("t_s,gradient_t_per_m,x1_m,x2_m\n0,0,0,0\n0.02,abc,,\n")
     with pytest.raises(ValueError, match="line 3, column 2"):
         cm.calibrate(p)
+
+
+def test_constant_sampling_reach_reports_the_coasted_schedule_bound():
+    m = cm.reach(range_cm=1.0, step_cm=1.0, sampling="constant")
+    on_grid = ~np.isnan(m.schedule_min_time_s)
+    assert on_grid.sum() == 8
+    assert np.all(m.schedule_min_time_s[on_grid] > m.min_time_bound_s[on_grid])
+    assert m.summary["median_settle_over_schedule_bound"] < m.summary["median_settle_over_bound"]

@@ -335,6 +335,10 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         displacement[2 * i] = x0[2 * i] - target[2 * i];
     }
     let min_time_bound_s = S::chain_time_s(&displacement);
+    let schedule_min_time_s = match opts.sampling {
+        Sampling::Constant => S::coasted_time_s(&displacement),
+        Sampling::Ideal | Sampling::Variable => min_time_bound_s,
+    };
     let mut retarget_pending = retarget;
 
     let mut measurements = Vec::new();
@@ -415,6 +419,10 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         metrics.min_time_bound_s = Some(min_time_bound_s);
         metrics.settle_over_bound = metrics.settle_time_s.map(|t| t / min_time_bound_s);
         metrics.held_settle_over_bound = metrics.settle_held_s.map(|t| t / min_time_bound_s);
+    }
+    if retarget.is_none() && schedule_min_time_s.is_finite() && schedule_min_time_s > 0.0 {
+        metrics.schedule_min_time_s = Some(schedule_min_time_s);
+        metrics.settle_over_schedule_bound = metrics.settle_time_s.map(|t| t / schedule_min_time_s);
     }
     metrics.workspace_excursion_m = records
         .iter()

@@ -44,6 +44,16 @@ pub struct Metrics {
     /// ratio wherever it is printed; `null` when either is.
     #[serde(default)]
     pub held_settle_over_bound: Option<f64>,
+    /// Minimum time of the schedule actually played, s: under constant
+    /// sampling the stored coasted plan's (one sample per actuation phase,
+    /// then the tracking coast; `null` off its 5 mm plan grid), otherwise
+    /// `min_time_bound_s` (every sample actuates).
+    #[serde(default)]
+    pub schedule_min_time_s: Option<f64>,
+    /// settle_time_s / schedule_min_time_s (the strict settle); `null`
+    /// when either is.
+    #[serde(default)]
+    pub settle_over_schedule_bound: Option<f64>,
     /// Farthest any capsule went beyond the workspace box, m (0: inside).
     #[serde(default)]
     pub workspace_excursion_m: f64,
@@ -221,6 +231,8 @@ impl Metrics {
             min_time_bound_s: None,
             settle_over_bound: None,
             held_settle_over_bound: None,
+            schedule_min_time_s: None,
+            settle_over_schedule_bound: None,
             workspace_excursion_m: 0.0,
             first_in_band_s: first_in_band,
             time_in_band_after_entry,
@@ -351,10 +363,12 @@ mod tests {
             "time_in_band_after_entry",
             "settle_held_s",
             "held_settle_over_bound",
+            "schedule_min_time_s",
+            "settle_over_schedule_bound",
         ] {
             assert!(keys.contains(&k), "{k}");
         }
-        assert_eq!(keys.len(), 14);
+        assert_eq!(keys.len(), 16);
     }
 
     #[test]

@@ -71,6 +71,10 @@ pub struct ReachPoint {
     pub min_time_bound_s: Option<f64>,
     /// settle_time_s / min_time_bound_s.
     pub settle_over_bound: Option<f64>,
+    /// The played schedule's minimum time and the settle's ratio to it
+    /// (`Metrics::schedule_min_time_s`; constant sampling: the coasted plan).
+    pub schedule_min_time_s: Option<f64>,
+    pub settle_over_schedule_bound: Option<f64>,
     /// The held settle (in the band for 1 s, `Metrics::settle_held_s`),
     /// labelled as such.
     pub held_settle_time_s: Option<f64>,
@@ -85,6 +89,9 @@ pub struct ReachSummary {
     pub never_settled: usize,
     pub median_settle_over_bound: Option<f64>,
     pub worst_settle_over_bound: Option<f64>,
+    /// The same against the played schedule's minimum time.
+    pub median_settle_over_schedule_bound: Option<f64>,
+    pub worst_settle_over_schedule_bound: Option<f64>,
     /// The target of the worst ratio, m.
     pub worst_ratio_target_m: Option<Vec<f64>>,
     pub median_settle_time_s: Option<f64>,
@@ -196,6 +203,8 @@ pub fn reach_map(
                         settle_time_s: m.settle_time_s,
                         min_time_bound_s: m.min_time_bound_s,
                         settle_over_bound: m.settle_over_bound,
+                        schedule_min_time_s: m.schedule_min_time_s,
+                        settle_over_schedule_bound: m.settle_over_schedule_bound,
                         held_settle_time_s: m.settle_held_s,
                         final_position_error_m: Some(m.final_position_error_m),
                     }
@@ -206,6 +215,8 @@ pub fn reach_map(
                     settle_time_s: None,
                     min_time_bound_s: None,
                     settle_over_bound: None,
+                    schedule_min_time_s: None,
+                    settle_over_schedule_bound: None,
                     held_settle_time_s: None,
                     final_position_error_m: None,
                 },
@@ -238,6 +249,10 @@ impl ReachSummary {
             .collect();
         let worst = ratios.iter().max_by(|a, b| a.0.total_cmp(&b.0));
         let settles: Vec<f64> = points.iter().filter_map(|p| p.settle_time_s).collect();
+        let schedule_ratios: Vec<f64> = points
+            .iter()
+            .filter_map(|p| p.settle_over_schedule_bound)
+            .collect();
         ReachSummary {
             targets: points.len(),
             refused: points.iter().filter(|p| p.refused.is_some()).count(),
@@ -247,6 +262,8 @@ impl ReachSummary {
                 .count(),
             median_settle_over_bound: median(ratios.iter().map(|r| r.0).collect()),
             worst_settle_over_bound: worst.map(|w| w.0),
+            median_settle_over_schedule_bound: median(schedule_ratios.clone()),
+            worst_settle_over_schedule_bound: schedule_ratios.into_iter().reduce(f64::max),
             worst_ratio_target_m: worst.map(|w| w.1.target_m.clone()),
             median_settle_time_s: median(settles.clone()),
             worst_settle_time_s: settles.into_iter().reduce(f64::max),
@@ -284,6 +301,8 @@ mod tests {
             settle_time_s: s,
             min_time_bound_s: None,
             settle_over_bound: r,
+            schedule_min_time_s: None,
+            settle_over_schedule_bound: r,
             held_settle_time_s: s,
             final_position_error_m: None,
         };

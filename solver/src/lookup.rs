@@ -263,6 +263,38 @@ pub fn chain_time_s<const NX: usize>(t: &Tables, use_tables: bool, d: &[f64; NX]
     }
 }
 
+/// How far a displacement may lie from a plan grid point and still count
+/// as that point's move, m (rounding of lattice targets such as 0.03).
+const ON_PLAN_GRID_M: f64 = 1e-9;
+
+/// Minimum rest-to-rest time (s) of the stored constant-sampling plan
+/// (one sample per actuation phase, then the coast) for displacement `d`
+/// (positions; speeds ignored): the bound of the schedule constant
+/// sampling plays. Infinite off the plan grid, for a plan that does not
+/// arrive, and without coasted tables.
+pub fn coasted_time_s<const NX: usize>(t: &Tables, use_tables: bool, d: &[f64; NX]) -> f64 {
+    if !use_tables || t.elements(Section::CoastedPlanMinTime) == 0 {
+        return f64::INFINITY;
+    }
+    let axis = t.plan_axis;
+    let mut flat = 0usize;
+    let mut i = 0;
+    while i < NX / 2 {
+        let Some(j) = axis_nearest(&axis, d[2 * i]) else {
+            return f64::INFINITY;
+        };
+        if libm::fabs(axis.start + j as f64 * axis.step - d[2 * i]) > ON_PLAN_GRID_M {
+            return f64::INFINITY;
+        }
+        flat = flat * axis.count + j;
+        i += 1;
+    }
+    if t.u8_at(Section::CoastedPlanReached, flat) == 0 {
+        return f64::INFINITY;
+    }
+    t.f64_at(Section::CoastedPlanMinTime, flat)
+}
+
 /// Whether a start at rest at relative position `e` (speeds ignored) is
 /// covered by a stored plan that reaches its target.
 pub fn covers_from_rest<const NX: usize>(t: &Tables, use_tables: bool, e: &[f64; NX]) -> bool {

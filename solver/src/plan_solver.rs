@@ -2,7 +2,9 @@
 //! generic [`Solver`] for any module's [`Spec`].
 
 use crate::explicit::explicit_step_ops;
-use crate::lookup::{chain_time_s, covers_from_rest, first_leg, qp_iterations_measured};
+use crate::lookup::{
+    chain_time_s, coasted_time_s, covers_from_rest, first_leg, qp_iterations_measured,
+};
 use crate::qp::QpEngine;
 use crate::refine::Solver;
 use crate::report::{Leg, SolveReport};
@@ -82,6 +84,9 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// Minimum rest-to-rest time of that chain (summed over its legs), s;
     /// infinite without one.
     fn chain_time_s(d: &[f64; NX]) -> f64;
+    /// Minimum rest-to-rest time of the stored constant-sampling plan for
+    /// `d` (the coasted schedule's bound), s; infinite off the plan grid.
+    fn coasted_time_s(d: &[f64; NX]) -> f64;
     /// Most active-set iterations one QP took in the offline solves in the
     /// warm-start index cell of `e` (`capsule-mpc generate`); 0 when not
     /// measured or outside the index.
@@ -177,6 +182,9 @@ impl<
     }
     fn chain_time_s(d: &[f64; NX]) -> f64 {
         chain_time_s(&S::TABLES, S::USE_TABLES, d)
+    }
+    fn coasted_time_s(d: &[f64; NX]) -> f64 {
+        coasted_time_s(&S::TABLES, S::USE_TABLES, d)
     }
     fn qp_iterations_measured(e: &[f64; NX]) -> u32 {
         qp_iterations_measured(&S::TABLES, S::QP_ITERATION_MAP, e)

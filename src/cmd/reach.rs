@@ -92,6 +92,14 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         fmt(summary.median_settle_time_s),
         fmt(summary.worst_settle_time_s),
     );
+    if sampling == Sampling::Constant {
+        println!(
+            "settle / coasted-schedule minimum time (constant sampling's own bound, {} targets on its plan grid): median {} worst {}",
+            points.iter().filter(|p| p.schedule_min_time_s.is_some()).count(),
+            fmt(summary.median_settle_over_schedule_bound),
+            fmt(summary.worst_settle_over_schedule_bound),
+        );
+    }
     if let Some(path) = &args.json {
         let mut json = serde_json::json!({
             "sampling": sampling.name(),

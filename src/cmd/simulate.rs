@@ -52,8 +52,16 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         args.seed,
         m.settle_time_s.map_or("never".to_string(), |t| format!("{t:.3} s")),
         m.min_time_bound_s.map_or(String::new(), |b| format!(
-            " (min-time bound {b:.3} s{})",
-            m.settle_over_bound.map_or(String::new(), |r| format!(", ratio {r:.2}"))
+            " (min-time bound {b:.3} s{}{})",
+            m.settle_over_bound.map_or(String::new(), |r| format!(", ratio {r:.2}")),
+            match (sampling, m.schedule_min_time_s) {
+                (Sampling::Constant, Some(c)) => format!(
+                    "; coasted schedule {c:.3} s{}",
+                    m.settle_over_schedule_bound
+                        .map_or(String::new(), |r| format!(", ratio {r:.2}"))
+                ),
+                _ => String::new(),
+            }
         )),
         match m.settle_held_s {
             Some(h) if Some(h) != m.settle_time_s => format!(" (held 1 s from {h:.3} s)"),

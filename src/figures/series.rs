@@ -209,6 +209,8 @@ mod tests {
                 min_time_bound_s: None,
                 settle_over_bound: None,
                 held_settle_over_bound: None,
+                schedule_min_time_s: None,
+                settle_over_schedule_bound: None,
                 workspace_excursion_m: 0.0,
                 settle_held_s: None,
                 first_in_band_s: None,
