@@ -80,3 +80,34 @@ fn a_state_no_plan_covers_falls_back() {
     assert_eq!(out.status, RuntimeStatus::Fallback);
     assert_eq!(c.mode(), Mode::Fallback);
 }
+
+/// The simulator's report carries the mode timeline: it starts planning,
+/// ends in the hold shortly after the strict settle, and each entry is a
+/// change of mode at a later time.
+#[test]
+fn the_run_report_carries_the_mode_timeline() {
+    use capsule_mpc_generator::config::Config;
+    use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling as SimSampling};
+    let config = Config::embedded_default();
+    for target in [A, C] {
+        let mut opts = RunOptions::new(&config, target.to_vec(), SimSampling::Ideal);
+        opts.duration_s = 2.0;
+        let report = run(&config, &opts).unwrap();
+        let modes = report.modes.expect("timeline");
+        assert_eq!(modes.first().unwrap().mode, Mode::Plan.name());
+        let last = modes.last().unwrap();
+        assert_eq!(last.mode, Mode::Hold.name(), "{target:?}: {modes:?}");
+        assert!(
+            modes
+                .windows(2)
+                .all(|w| w[0].t_s < w[1].t_s && w[0].mode != w[1].mode),
+            "{modes:?}"
+        );
+        let settle = report.metrics.settle_time_s.expect("settles");
+        assert!(
+            (last.t_s - settle).abs() <= 0.1,
+            "{target:?}: hold at {} s, settle {settle} s",
+            last.t_s
+        );
+    }
+}

@@ -6,7 +6,7 @@ use crate::metrics::Metrics;
 use crate::mismatch::PlantMismatch;
 use crate::plant::{Phase, Plant};
 use crate::report::{
-    FrameCounts, MeasurementRecord, ModelParams, PlantReport, RunReport, TierCycles,
+    FrameCounts, MeasurementRecord, ModeChange, ModelParams, PlantReport, RunReport, TierCycles,
 };
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
@@ -344,6 +344,7 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     let mut measurements = Vec::new();
     let mut max_ns: u64 = 0;
     let mut statuses = StatusCounts::default();
+    let mut modes: Vec<ModeChange> = Vec::new();
     let mut cycle = 0usize;
     let tracking_s = settings.tracking_time_s;
     while plant.time_s() < opts.duration_s - 1e-9 {
@@ -399,6 +400,12 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
             }
             out
         };
+        if modes.last().map(|m: &ModeChange| m.mode.as_str()) != Some(ctl.mode().name()) {
+            modes.push(ModeChange {
+                t_s: plant.time_s(),
+                mode: ctl.mode().name().to_string(),
+            });
+        }
         statuses.count(out.status);
         match out.solve.map(|r| r.tier) {
             Some(Tier::Explicit) => statuses.explicit += 1,
@@ -458,6 +465,7 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         explicit: statuses.explicit,
         refined: statuses.refined,
     });
+    report.modes = Some(modes);
     Ok(report)
 }
 

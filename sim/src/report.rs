@@ -99,6 +99,19 @@ pub struct RunReport {
     /// How the controller took the tracking frames (scanner-cycle samplings).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames: Option<FrameCounts>,
+    /// The controller's mode timeline: the cycle start time at which each
+    /// mode began (`Controller::mode`: no_target, hold, brake, plan,
+    /// fallback), in order.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub modes: Option<Vec<ModeChange>>,
+}
+
+/// One entry of the mode timeline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModeChange {
+    /// Start of the cycle that entered the mode, s (plant time).
+    pub t_s: f64,
+    pub mode: String,
 }
 
 /// Tracking frames by what the controller did with them: `rejected` counts
@@ -144,6 +157,7 @@ impl RunReport {
             sampling: None,
             fallback_cycles: None,
             tier_cycles: None,
+            modes: None,
             frames: None,
             disturbance: None,
             seed: None,

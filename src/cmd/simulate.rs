@@ -6,6 +6,7 @@ use crate::figures::plot_run;
 use anyhow::Result;
 use capsule_mpc_generator::config::DisturbanceKind;
 use capsule_mpc_generator::model::Model;
+use capsule_mpc_runtime::controller::Mode;
 use capsule_mpc_sim::closed_loop::{Preset, Sampling};
 use capsule_mpc_sim::plant::DisturbanceLevel;
 use capsule_mpc_sim::request::SimulateRequest;
@@ -88,6 +89,26 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             },
             t.explicit,
             t.refined
+        );
+    }
+    if let Some(modes) = &report.modes {
+        let last_hold = modes.iter().rev().find(|m| m.mode == "hold");
+        println!(
+            "mode entries over {} changes: {}{}",
+            modes.len().saturating_sub(1),
+            Mode::ALL
+                .iter()
+                .map(|m| format!(
+                    "{} {}",
+                    m.name(),
+                    modes.iter().filter(|c| c.mode == m.name()).count()
+                ))
+                .collect::<Vec<_>>()
+                .join(", "),
+            last_hold.map_or(String::new(), |h| format!(
+                "; last entered the hold at {:.3} s",
+                h.t_s
+            ))
         );
     }
     if let Some(path) = &args.json {

@@ -25,6 +25,28 @@ pub enum Mode {
     Fallback,
 }
 
+impl Mode {
+    /// Every mode, in declaration order.
+    pub const ALL: [Mode; 5] = [
+        Mode::NoTarget,
+        Mode::Hold,
+        Mode::Brake,
+        Mode::Plan,
+        Mode::Fallback,
+    ];
+
+    /// The mode's name in reports (snake case).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Mode::NoTarget => "no_target",
+            Mode::Hold => "hold",
+            Mode::Brake => "brake",
+            Mode::Plan => "plan",
+            Mode::Fallback => "fallback",
+        }
+    }
+}
+
 /// The state estimate and the frame gate's memory.
 #[derive(Debug, Clone)]
 pub(super) struct Estimation<const NX: usize> {
