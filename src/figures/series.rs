@@ -225,6 +225,7 @@ mod tests {
             tier_cycles: None,
             plant: None,
             frames: None,
+            modes: None,
         }
     }
 }
