@@ -19,6 +19,7 @@ pub mod bench;
 pub mod cli;
 pub mod cmd;
 pub mod figures;
+pub mod out;
 pub mod pulseq_export;
 
 /// The Rust host in `docs/embedding.md`, compiled and run as a doctest.

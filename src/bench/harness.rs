@@ -186,14 +186,18 @@ pub fn measure(
         *origins.entry(s.origin.name()).or_default() += 1;
     }
 
-    println!(
+    crate::out!(
         "capsule-mpc bench: {} states ({origins:?}), core {core:?}, timer overhead {overhead} ns",
         states.len()
-    );
-    println!(
+    )?;
+    crate::out!(
         "{:<34} {:>11} {:>11} {:>11} {:>11}",
-        "single shot", "median", "p99", "p99.9", "max"
-    );
+        "single shot",
+        "median",
+        "p99",
+        "p99.9",
+        "max"
+    )?;
     let names = [
         "controller step (warm)",
         "controller step (cold)",
@@ -211,23 +215,23 @@ pub fn measure(
                 .zip(min_p),
         );
     for (name, p) in rows {
-        println!(
+        crate::out!(
             "{name:<34} {:>11} {:>11} {:>11} {:>11}",
             fmt_us(p.median),
             fmt_us(p.p99),
             fmt_us(p.p999),
             fmt_us(p.max)
-        );
+        )?;
     }
-    println!("QP iterations (max per QP, per solve): max {max_iter}, histogram {hist:?}; statuses {statuses:?}");
-    println!(
+    crate::out!("QP iterations (max per QP, per solve): max {max_iter}, histogram {hist:?}; statuses {statuses:?}")?;
+    crate::out!(
         "QP iteration map (offline, per index cell; largest entry {}): {above_map} of {} solves above their cell's count, {unmapped} in cells without one",
         qp_iteration_map::CONTROLLER_MAX,
         2 * timings.len()
-    );
-    println!("worst states (by max of cold/warm controller step; re-timed medians show whether the max was noise):");
+    )?;
+    crate::out!("worst states (by max of cold/warm controller step; re-timed medians show whether the max was noise):")?;
     for w in &worst {
-        println!(
+        crate::out!(
             "  #{} {} e = {:?}: cold {} ns, warm {} ns, re-timed median cold {} ns, warm {} ns, {} QP iterations",
             w["index"],
             w["origin"].as_str().unwrap_or(""),
@@ -237,11 +241,11 @@ pub fn measure(
             w["retimed_step_cold_median_ns"],
             w["retimed_step_warm_median_ns"],
             w["max_qp_iterations"]
-        );
+        )?;
     }
 
-    let peers = run_peers(states, problem, peer_count);
-    let tiers = measure_tiers(states, peer_count.max(1000));
+    let peers = run_peers(states, problem, peer_count)?;
+    let tiers = measure_tiers(states, peer_count.max(1000))?;
 
     Ok(json!({
         "step_ns": step_warm.json(),

@@ -195,9 +195,13 @@ struct Check {
 /// Runs every peer on `count` of the states (evenly spread); prints their
 /// table and returns their JSON. `problem` (the config's constants) only
 /// enters the check's report.
-pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usize) -> Value {
+pub(crate) fn run_peers(
+    states: &[BenchState],
+    problem: &RefProblem,
+    count: usize,
+) -> std::io::Result<Value> {
     if count == 0 {
-        return json!({});
+        return Ok(json!({}));
     }
     let picks: Vec<usize> = (0..count).map(|i| i * states.len() / count).collect();
     let mut engines = engine_peers();
@@ -271,12 +275,12 @@ pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usiz
     let ours_step = Percentiles::of(&stats[0].step_ns).median;
     let ours_qp = Percentiles::of(&stats[0].qp_ns).median;
     let mut out = serde_json::Map::new();
-    println!(
+    crate::out!(
         "peers on {} states (warm step, same state and start plan; times per Solver::solve = table check + {} SQP iterations of the generated solver, each engine wrapped alike; ratios vs the active-set engine):",
         stats[0].step_ns.len(),
         spec::SQP_ITERATIONS
-    );
-    println!(
+    )?;
+    crate::out!(
         "{:<12} {:>11} {:>11} {:>11} {:>7} {:>11} {:>11} {:>7} {:>11} {:>11} {:>6}",
         "",
         "step med",
@@ -289,14 +293,14 @@ pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usiz
         "|du0| max",
         "|u0| max",
         "iters"
-    );
+    )?;
     for (engine, st) in engines.iter().zip(&stats) {
         let j = st.json(ours_step, ours_qp);
-        print_peer(engine.name(), &j);
+        print_peer(engine.name(), &j)?;
         out.insert(engine.name().to_string(), j);
     }
     let j = open_stats.json(ours_step, ours_qp);
-    print_peer("open", &j);
+    print_peer("open", &j)?;
     out.insert("open".to_string(), j);
     #[cfg(not(feature = "peers-osqp"))]
     out.insert(
@@ -304,16 +308,16 @@ pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usiz
         json!({"skipped": "build with --features peers-osqp (needs cmake)"}),
     );
     let identical = check.differing == 0;
-    println!(
+    crate::out!(
         "active-set engine (wrapped) vs the plain generated solver: {} of {} warm steps bit for bit identical (max |u0| difference {:.3e} T/m, max relative cost difference {:.3e})",
         check.compared - check.differing,
         check.compared,
         check.max_abs_u0,
         check.max_rel_cost
-    );
-    println!(
+    )?;
+    crate::out!(
         "|du0|: first QP's step on u0 vs the active-set engine's (identical QP data); |u0|: first input after the step vs the generated solver's; open: no QP, |du0| = |u0|"
-    );
+    )?;
     out.insert(
         "reference_check".to_string(),
         json!({
@@ -326,16 +330,16 @@ pub(crate) fn run_peers(states: &[BenchState], problem: &RefProblem, count: usiz
             "what": "the generated solver with the wrapped active-set engine (the peers' reference row) against the plain Solver on the same warm cases: predicted state, plan, cost and status compared bit for bit",
         }),
     );
-    Value::Object(out)
+    Ok(Value::Object(out))
 }
 
-fn print_peer(name: &str, j: &Value) {
+fn print_peer(name: &str, j: &Value) -> std::io::Result<()> {
     let ns = |k: &str| j[k].as_u64().map_or("-".to_string(), fmt_us);
     let ratio = |k: &str| {
         j[k].as_f64()
             .map_or("-".to_string(), |r| format!("{r:.1}x"))
     };
-    println!(
+    crate::out!(
         "{name:<12} {:>11} {:>11} {:>11} {:>7} {:>11} {:>11} {:>7} {:>11.2e} {:>11.2e} {:>6}",
         ns("median_ns"),
         ns("p99_ns"),
@@ -347,7 +351,7 @@ fn print_peer(name: &str, j: &Value) {
         j["max_abs_du"].as_f64().unwrap_or(0.0),
         j["max_abs_u0"].as_f64().unwrap_or(0.0),
         j["max_iterations"]
-    );
+    )
 }
 
 #[cfg(test)]

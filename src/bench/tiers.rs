@@ -50,7 +50,7 @@ fn after_one_explicit_sample(e: &[f64; NX]) -> Option<Start> {
 }
 
 /// Times both tiers; returns the `tiers` JSON and prints the table.
-pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
+pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> std::io::Result<Value> {
     let (origins, starts): (Vec<[f64; NX]>, Vec<Start>) = states
         .iter()
         .filter_map(|s| after_one_explicit_sample(&s.e).map(|start| (s.e, start)))
@@ -97,32 +97,32 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
     }
     let measured_max_ops = explicit_step_ops(N, NX, K, max_iterations as usize);
     let certified = <Solver as PlanSolver<NX, K>>::EXPLICIT_CERTIFIED_OPS;
-    println!(
+    crate::out!(
         "tiers ({} states in range, min of {REPEATS}): {:<10} {:>9} {:>9} {:>9}",
         starts.len(),
         "",
         "median",
         "p99",
         "max"
-    );
+    )?;
     for (name, p) in [
         ("explicit (cold: one sweep over all states)", ex),
         ("explicit in the loop (after the step before)", in_loop),
         ("refined", re),
     ] {
-        println!(
+        crate::out!(
             "  {name:<46} {:>9} {:>9} {:>9}",
             fmt_us(p.median),
             fmt_us(p.p99),
             fmt_us(p.max)
-        );
+        )?;
     }
-    println!(
+    crate::out!(
         "explicit QP iterations: max {max_iterations} (cap {}), histogram {histogram:?}; operations at that count {measured_max_ops}, certified bound {certified}",
         spec::QP_MAX_ITERATIONS
-    );
-    let peers = explicit_qp_peers(&starts, peer_count);
-    json!({
+    )?;
+    let peers = explicit_qp_peers(&starts, peer_count)?;
+    Ok(json!({
         "explicit": {
             "median_ns": ex.median, "p99_ns": ex.p99, "max_ns": ex.max,
             "max_qp_iterations": max_iterations,
@@ -143,7 +143,7 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
         "repeats": REPEATS,
         "explicit_table_bytes": explicit_table_bytes(),
         "peers_on_explicit_qp": peers,
-    })
+    }))
 }
 
 /// The explicit tier's box QP (the same H, gradient and box it solves,
@@ -151,7 +151,7 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> Value {
 /// `peers-osqp`) as `QpEngine`s, timed against the generated active-set QP
 /// warm-started from the stored active set; the ratio is peer / ours at
 /// the median, with the largest input difference.
-fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
+fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> std::io::Result<Value> {
     let count = peer_count.min(starts.len());
     let stride = (starts.len() / count.max(1)).max(1);
     let mut cases: Vec<(BoxQp<N>, usize)> = Vec::new();
@@ -217,17 +217,17 @@ fn explicit_qp_peers(starts: &[Start], peer_count: usize) -> Value {
         }
         let p = Percentiles::of(&ns);
         let ratio = p.median as f64 / ours.median.max(1) as f64;
-        println!(
+        crate::out!(
             "  explicit QP: ours {} median, {name} {} median ({ratio:.1}x), largest input difference {max_dx:.1e} T/m",
             fmt_us(ours.median),
             fmt_us(p.median)
-        );
+        )?;
         out.insert(
             name.into(),
             json!({"median_ns": p.median, "max_ns": p.max, "ratio_to_ours": ratio, "max_abs_du_t_per_m": max_dx}),
         );
     }
-    Value::Object(out)
+    Ok(Value::Object(out))
 }
 
 /// Bytes of the explicit tier's sections of the table file.

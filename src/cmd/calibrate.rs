@@ -38,7 +38,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     fitted.validate().context("the fitted config")?;
     let fitted_toml = toml::to_string(&fitted).context("writing the fitted config as TOML")?;
     for c in &cal.capsules {
-        println!(
+        crate::out!(
             "{}: gain {:.3} m/s^2 per T/m (+- {:.3}, config {:.3}), drag {:.4} 1/m (+- {:.4}, config {:.4}); {} frames, residual {:.3} mm",
             c.name,
             c.gain,
@@ -49,13 +49,13 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             c.drag_model,
             c.measurements,
             1e3 * c.residual_rms_m
-        );
+        )?;
     }
-    println!(
+    crate::out!(
         "residual RMS {:.3} mm ({} drag law)",
         1e3 * cal.residual_rms_m,
         cal.drag_law
-    );
+    )?;
     for w in &cal.warnings {
         eprintln!("warning: {w}");
     }
@@ -64,18 +64,18 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     }
     if let Some(dir) = &args.plot {
         for f in crate::figures::calibration::plot_calibration(&log, &cal, &config, dir)? {
-            println!("wrote {}", f.display());
+            crate::out!("wrote {}", f.display())?;
         }
     }
     if let Some(p) = &args.out {
         let header = "# Written by `capsule-mpc calibrate`: the base config with each capsule's fitted\n\
                       # gain_m_per_s2_per_t_per_m and drag_per_m (overrides of the derived values).\n";
         write_file_atomically(p, format!("{header}{fitted_toml}").as_bytes())?;
-        println!(
+        crate::out!(
             "wrote {} (regenerate with `capsule-mpc generate --config {}`)",
             p.display(),
             p.display()
-        );
+        )?;
     }
     Ok(())
 }
@@ -114,14 +114,14 @@ fn play(e: &Excitation, config: &Config, args: &CalibrateArgs) -> Result<Trackin
 
 fn design(args: &CalibrateArgs, config: &Config) -> Result<()> {
     let e = design_excitation(config, args.duration).map_err(anyhow::Error::msg)?;
-    println!(
+    crate::out!(
         "excitation: {:.1} s, {} actuation samples ({} per push at full gradient), largest excursion on the model {:.1} mm, ends {:.1} mm from the start",
         args.duration,
         e.actuation_rows.len(),
         e.push_samples,
         1e3 * e.max_excursion_m(),
         1e3 * e.end_offset_m()
-    );
+    )?;
     if args.csv.is_none() && args.pulseq.is_none() {
         bail!("--design writes its sequence to --csv FILE and/or --pulseq FILE.seq");
     }
@@ -132,7 +132,7 @@ fn design(args: &CalibrateArgs, config: &Config) -> Result<()> {
             e.log.clone()
         };
         write_file_atomically(p, log.to_csv().as_bytes())?;
-        println!("wrote {}", p.display());
+        crate::out!("wrote {}", p.display())?;
     }
     if let Some(p) = &args.pulseq {
         let mut run = PlayedRun {
@@ -156,7 +156,7 @@ fn design(args: &CalibrateArgs, config: &Config) -> Result<()> {
         }
         write_sequence_file(p, &run, &crate::pulseq_export::sequence_options(config))
             .with_context(|| format!("writing the Pulseq sequence {}", p.display()))?;
-        println!("wrote {}", p.display());
+        crate::out!("wrote {}", p.display())?;
     }
     Ok(())
 }

@@ -7,7 +7,7 @@ use anyhow::Result;
 /// Writes the figures into `--out` and prints one line per figure.
 pub fn run(args: &FiguresArgs) -> Result<()> {
     for f in all_figures(&args.out, args.duration)? {
-        println!("{}", f.describe());
+        crate::out!("{}", f.describe())?;
     }
     Ok(())
 }

@@ -65,7 +65,7 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         for r in 0..sharding.rounds().len() {
             eprintln!("{}", sharding.describe(r)?);
         }
-        println!("{}", sharding.rounds().len());
+        crate::out!("{}", sharding.rounds().len())?;
         return Ok(());
     }
     if !args.parts.is_empty() && args.shard.is_none() && !args.merge {
@@ -85,13 +85,13 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         run.part.write(out)?;
         let slowest = run.unit_seconds.iter().copied().fold(0.0, f64::max);
         let busy: f64 = run.unit_seconds.iter().sum();
-        println!(
+        crate::out!(
             "round {round}, shard {shard}: {} units in {:.1} s (unit times: sum {busy:.1} s, \
              slowest {slowest:.2} s), wrote {}",
             run.unit_seconds.len(),
             started.elapsed().as_secs_f64(),
             out.display()
-        );
+        )?;
         return Ok(());
     }
     let out_dir = args.out.clone().unwrap_or_else(|| "generated".into());
@@ -132,14 +132,14 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
                 names.join(", ")
             );
         }
-        println!(
+        crate::out!(
             "{} matches a fresh generation ({elapsed:.1} s)",
             out_dir.display()
-        );
+        )?;
         return Ok(());
     }
     write_atomically(&out_dir, &files)?;
-    println!(
+    crate::out!(
         "generated {} (module {}) in {elapsed:.1} s: {} plans ({} reach their target), {} index cells, {} {} bytes",
         out_dir.display(),
         module.module_name(),
@@ -148,29 +148,29 @@ pub fn run(args: &GenerateArgs) -> Result<()> {
         t.index.len(),
         module.tables_path(),
         table_bytes
-    );
-    print_explicit_tier(&config, &files);
+    )?;
+    print_explicit_tier(&config, &files)?;
     Ok(())
 }
 
 /// The explicit tier's data and its certified worst case (emitted as
 /// `EXPLICIT_CERTIFIED_OPS`): operations of one step from the loop bounds
 /// with the QP at its iteration cap.
-fn print_explicit_tier(config: &Config, files: &GeneratedFiles) {
+fn print_explicit_tier(config: &Config, files: &GeneratedFiles) -> std::io::Result<()> {
     if files.explicit.samples.is_empty() {
-        println!("explicit tier: none in this module (refine = none is refused for it)");
-        return;
+        crate::out!("explicit tier: none in this module (refine = none is refused for it)")?;
+        return Ok(());
     }
     let c = &config.controller;
     let nx = 2 * config.capsule_count();
     let cap = qp_max_iterations(c.horizon_steps);
-    println!(
+    crate::out!(
         "explicit tier: {} samples, {} bytes; certified worst case {} floating-point operations per step ({} QP iterations at most)",
         files.explicit.samples.len(),
         files.explicit.bytes(c.horizon_steps, nx),
         explicit_step_ops(c.horizon_steps, nx, c.plan_steps, cap),
         cap
-    );
+    )
 }
 
 /// The `three-capsules` module is named for its capsule count (the

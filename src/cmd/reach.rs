@@ -57,7 +57,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
     let points = reach_map(&config, &opts, &|| bar.inc(1))?;
     bar.finish_and_clear();
     let summary = ReachSummary::of(&points);
-    print_table(&points);
+    print_table(&points)?;
     let fmt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
     // The zero-gradient gap after each actuation phase (tracking + extra
     // delay); ideal sampling has none.
@@ -73,7 +73,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
     } else {
         String::new()
     };
-    println!(
+    crate::out!(
         "{} targets ({} sampling{gap}, disturbance {:?} {}, seed {}) in {:.1} s: {} refused, {} never settled; settle / min-time bound median {} worst {}{}; settle time median {} s worst {} s",
         summary.targets,
         sampling.name(),
@@ -91,14 +91,14 @@ pub fn run(args: &ReachArgs) -> Result<()> {
             .map_or(String::new(), |t| format!(" (at {:?} cm)", t.iter().map(|v| v * 100.0).collect::<Vec<_>>())),
         fmt(summary.median_settle_time_s),
         fmt(summary.worst_settle_time_s),
-    );
+    )?;
     if sampling == Sampling::Constant {
-        println!(
+        crate::out!(
             "settle / coasted-schedule minimum time (constant sampling's own bound, {} targets on its plan grid): median {} worst {}",
             points.iter().filter(|p| p.schedule_min_time_s.is_some()).count(),
             fmt(summary.median_settle_over_schedule_bound),
             fmt(summary.worst_settle_over_schedule_bound),
-        );
+        )?;
     }
     if let Some(path) = &args.json {
         let mut json = serde_json::json!({
@@ -144,7 +144,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
             ),
         ] {
             for path in plot_heatmap(&points, value, &title, dir, stem)? {
-                println!("wrote {}", path.display());
+                crate::out!("wrote {}", path.display())?;
             }
         }
     }
@@ -152,14 +152,16 @@ pub fn run(args: &ReachArgs) -> Result<()> {
 }
 
 /// Settle times as a matrix for two capsules (rows: capsule 1), else a list.
-fn print_table(points: &[ReachPoint]) {
+fn print_table(points: &[ReachPoint]) -> std::io::Result<()> {
     let cell = |p: &ReachPoint| match (&p.refused, p.settle_time_s) {
         (Some(_), _) => " refused".to_string(),
         (None, Some(s)) => format!("{s:8.2}"),
         (None, None) => "   never".to_string(),
     };
     if points.first().is_some_and(|p| p.target_m.len() == 2) {
-        println!("settle time (s); rows: capsule 1 target (cm), columns: capsule 2 target (cm)");
+        crate::out!(
+            "settle time (s); rows: capsule 1 target (cm), columns: capsule 2 target (cm)"
+        )?;
         let distinct = |i: usize| {
             let mut v: Vec<f64> = points.iter().map(|p| p.target_m[i]).collect();
             v.sort_by(f64::total_cmp);
@@ -171,7 +173,7 @@ fn print_table(points: &[ReachPoint]) {
         for c in &cols {
             header += &format!("{:8.1}", c * 100.0);
         }
-        println!("{header}");
+        crate::out!("{header}")?;
         for r in &rows {
             let mut line = format!("{:8.1} ", r * 100.0);
             for c in &cols {
@@ -180,15 +182,16 @@ fn print_table(points: &[ReachPoint]) {
                     .find(|p| (p.target_m[0] - r).abs() < 1e-9 && (p.target_m[1] - c).abs() < 1e-9);
                 line += &found.map_or("       -".to_string(), cell);
             }
-            println!("{line}");
+            crate::out!("{line}")?;
         }
     } else {
         for p in points {
-            println!(
+            crate::out!(
                 "{:?} cm: {}",
                 p.target_m.iter().map(|v| v * 100.0).collect::<Vec<_>>(),
                 cell(p)
-            );
+            )?;
         }
     }
+    Ok(())
 }

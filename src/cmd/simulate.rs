@@ -44,7 +44,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     }
     let report = request.run(&config)?;
     let m = &report.metrics;
-    println!(
+    crate::out!(
         "scenario {} ({} sampling, {:?} preset, disturbance {}, seed {}): settle {}{}{} | in band {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
         args.scenario_name(),
         sampling.name(),
@@ -78,9 +78,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         m.duty_cycle_until_settled,
         m.state_bound_violations,
         m.max_step_compute_ns as f64 / 1e3
-    );
+    )?;
     if let Some(t) = report.tier_cycles {
-        println!(
+        crate::out!(
             "refine {}: plans from the explicit tier in {} cycles, from the refinement in {}",
             match opts.refine {
                 capsule_mpc_generator::config::RefineMode::None => "none",
@@ -89,11 +89,11 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             },
             t.explicit,
             t.refined
-        );
+        )?;
     }
     if let Some(modes) = &report.modes {
         let last_hold = modes.iter().rev().find(|m| m.mode == "hold");
-        println!(
+        crate::out!(
             "mode entries over {} changes: {}{}",
             modes.len().saturating_sub(1),
             Mode::ALL
@@ -109,14 +109,14 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
                 "; last entered the hold at {:.3} s",
                 h.t_s
             ))
-        );
+        )?;
     }
     if let Some(path) = &args.json {
         report.write_json(path)?;
     }
     if let Some(path) = &args.pulseq {
         let seq = crate::pulseq_export::write_pulseq(path, &report, &config)?;
-        println!(
+        crate::out!(
             "wrote {} ({} blocks: {} actuation, {} tracking, {} pause; {:.3} s)",
             path.display(),
             seq.blocks,
@@ -124,11 +124,11 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             seq.tracking_blocks,
             seq.delay_blocks,
             seq.duration_s
-        );
+        )?;
     }
     if let Some(dir) = &args.plot {
         for path in plot_run(&report, dir)? {
-            println!("wrote {}", path.display());
+            crate::out!("wrote {}", path.display())?;
         }
     }
     Ok(())
