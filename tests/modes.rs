@@ -50,7 +50,9 @@ fn a_reached_target_ends_in_the_hold_and_a_new_target_leaves_it() {
         assert!(!modes.contains(&Mode::Fallback), "{target:?}: {modes:?}");
         let first_hold = modes.iter().position(|&m| m == Mode::Hold).expect("holds");
         assert!(
-            modes[..first_hold].iter().all(|&m| m == Mode::Plan),
+            modes[..first_hold]
+                .iter()
+                .all(|&m| m == Mode::Plan || m == Mode::Brake),
             "{target:?}: {modes:?}"
         );
         assert!(

@@ -166,6 +166,18 @@ pub const HOLD_CENTRE_RELEASE_M: f64 = 3.0e-3;
 pub const HOLD_NATURAL_FREQUENCY_RAD_PER_S: f64 = 10.0;
 /// The hold law uses at most this fraction of u_max.
 pub const HOLD_MAX_GRADIENT_FRACTION: f64 = 0.25;
+/// End-game stall detection (see `Controller::stalled`): within this
+/// distance of the target, m, ...
+pub const STALL_REGION_M: f64 = 10.0e-3;
+/// ... the largest position error (plus the distance its speed covers in
+/// `STALL_LOOKAHEAD_S`) must shrink to this fraction of its
+/// best ...
+pub const STALL_PROGRESS: f64 = 0.8;
+/// ... within this much actuation time, s, or the controller brakes and
+/// re-plans from the stored plan.
+pub const STALL_S: f64 = 0.25;
+/// See `STALL_PROGRESS`, s.
+pub const STALL_LOOKAHEAD_S: f64 = 0.1;
 /// Default re-acquisition count, frames: 0.2 s at the default constant
 /// sampling (20 ms actuation + 20 ms tracking per frame). Five gross
 /// outliers in a row, with none of the frames between them accepted, are

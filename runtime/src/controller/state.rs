@@ -15,6 +15,9 @@ pub enum Mode {
     /// Terminal hold: nearly at rest at the target; the hold law
     /// (centre PD plus station-keeping dither) keeps the capsules there.
     Hold,
+    /// The end game stalled (`Controller::stalled`): one braking sample,
+    /// then the stored plan from rest takes over.
+    Brake,
     /// Following a plan: the explicit tier, then the refinement.
     Plan,
     /// No stored plan covers the state: braking, and the legs are
@@ -24,13 +27,20 @@ pub enum Mode {
 
 impl Mode {
     /// Every mode, in declaration order.
-    pub const ALL: [Mode; 4] = [Mode::NoTarget, Mode::Hold, Mode::Plan, Mode::Fallback];
+    pub const ALL: [Mode; 5] = [
+        Mode::NoTarget,
+        Mode::Hold,
+        Mode::Brake,
+        Mode::Plan,
+        Mode::Fallback,
+    ];
 
     /// The mode's name in reports (snake case).
     pub const fn name(self) -> &'static str {
         match self {
             Mode::NoTarget => "no_target",
             Mode::Hold => "hold",
+            Mode::Brake => "brake",
             Mode::Plan => "plan",
             Mode::Fallback => "fallback",
         }
@@ -110,6 +120,11 @@ pub(super) struct Supervision<const NX: usize> {
     pub recovering: bool,
     /// The mode of the last cycle.
     pub mode: Mode,
+    /// End-game progress (see `Controller::stalled`): the best (smallest)
+    /// largest error since the last progress, m, and the actuation time
+    /// since, s.
+    pub stall_best_m: f64,
+    pub stall_clock_s: f64,
 }
 
 impl<const NX: usize> Supervision<NX> {
@@ -121,6 +136,8 @@ impl<const NX: usize> Supervision<NX> {
             has_target: false,
             recovering: false,
             mode: Mode::NoTarget,
+            stall_best_m: f64::INFINITY,
+            stall_clock_s: 0.0,
         }
     }
 
