@@ -285,4 +285,17 @@ fn constant_sampling_reports_the_coasted_schedule_bound() {
         let m = run(&config, &opts).unwrap().metrics;
         assert_eq!(m.schedule_min_time_s, m.min_time_bound_s);
     }
+    // Off the 5 mm plan grid no coasted plan is stored: no bound, not a
+    // neighbour's.
+    let (config, mut opts) = options(
+        &[0.013, 0.0, -0.007, 0.0],
+        Sampling::Constant,
+        DisturbanceLevel::None,
+        1,
+    );
+    opts.duration_s = 3.0;
+    let m = run(&config, &opts).unwrap().metrics;
+    assert!(m.min_time_bound_s.is_some());
+    assert_eq!(m.schedule_min_time_s, None);
+    assert_eq!(m.settle_over_schedule_bound, None);
 }

@@ -187,17 +187,34 @@ pub fn lookup_fine<const NX: usize, const K: usize>(
     Some(())
 }
 
-/// The leg lattice cell of displacement `d = x_start - x_target` (positions;
-/// speeds ignored); None outside the lattice.
-fn leg_cell<const NX: usize>(t: &Tables, d: &[f64; NX]) -> Option<usize> {
-    let axis = t.leg_axis;
+/// The row-major cell of the positions of `d` (speeds ignored) on the
+/// lattice `axis` per capsule, each position at its nearest point; None
+/// outside the lattice, or, with `on_grid_m`, when a position lies farther
+/// than that from its point.
+fn nearest_cell<const NX: usize>(
+    axis: &Axis,
+    d: &[f64; NX],
+    on_grid_m: Option<f64>,
+) -> Option<usize> {
     let mut flat = 0usize;
     let mut i = 0;
     while i < NX / 2 {
-        flat = flat * axis.count + axis_nearest(&axis, d[2 * i])?;
+        let j = axis_nearest(axis, d[2 * i])?;
+        if on_grid_m
+            .is_some_and(|tol| libm::fabs(axis.start + j as f64 * axis.step - d[2 * i]) > tol)
+        {
+            return None;
+        }
+        flat = flat * axis.count + j;
         i += 1;
     }
     Some(flat)
+}
+
+/// The leg lattice cell of displacement `d = x_start - x_target` (positions;
+/// speeds ignored); None outside the lattice.
+fn leg_cell<const NX: usize>(t: &Tables, d: &[f64; NX]) -> Option<usize> {
+    nearest_cell(&t.leg_axis, d, None)
 }
 
 /// The first leg from rest at displacement `d = x_start - x_target` toward
@@ -276,19 +293,9 @@ pub fn coasted_time_s<const NX: usize>(t: &Tables, use_tables: bool, d: &[f64; N
     if !use_tables || t.elements(Section::CoastedPlanMinTime) == 0 {
         return f64::INFINITY;
     }
-    let axis = t.plan_axis;
-    let mut flat = 0usize;
-    let mut i = 0;
-    while i < NX / 2 {
-        let Some(j) = axis_nearest(&axis, d[2 * i]) else {
-            return f64::INFINITY;
-        };
-        if libm::fabs(axis.start + j as f64 * axis.step - d[2 * i]) > ON_PLAN_GRID_M {
-            return f64::INFINITY;
-        }
-        flat = flat * axis.count + j;
-        i += 1;
-    }
+    let Some(flat) = nearest_cell(&t.plan_axis, d, Some(ON_PLAN_GRID_M)) else {
+        return f64::INFINITY;
+    };
     if t.u8_at(Section::CoastedPlanReached, flat) == 0 {
         return f64::INFINITY;
     }
@@ -301,17 +308,7 @@ pub fn covers_from_rest<const NX: usize>(t: &Tables, use_tables: bool, e: &[f64;
     if !use_tables {
         return true;
     }
-    let axis = t.plan_axis;
-    let mut flat = 0usize;
-    let mut i = 0;
-    while i < NX / 2 {
-        match axis_nearest(&axis, e[2 * i]) {
-            Some(j) => flat = flat * axis.count + j,
-            None => return false,
-        }
-        i += 1;
-    }
-    t.u8_at(Section::PlanReached, flat) != 0
+    nearest_cell(&t.plan_axis, e, None).is_some_and(|flat| t.u8_at(Section::PlanReached, flat) != 0)
 }
 
 /// Fills `out` with the stored plan tail for relative state `e` from the

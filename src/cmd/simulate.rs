@@ -92,7 +92,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         )?;
     }
     if let Some(modes) = &report.modes {
-        let last_hold = modes.iter().rev().find(|m| m.mode == "hold");
+        let last_hold = modes.iter().rev().find(|m| m.mode == Mode::Hold.name());
         crate::out!(
             "mode entries over {} changes: {}{}",
             modes.len().saturating_sub(1),
