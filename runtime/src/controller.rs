@@ -1,7 +1,7 @@
 //! The scanner-cycle controller: estimator + generated solver + switching
 //! rule + fault handling, in one fixed-size struct.
 
-use crate::estimator::CapsuleFilter;
+use crate::estimator::{CapsuleFilter, ScaleEstimate};
 use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
     PaperConstants, TightInputs,
@@ -201,6 +201,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// Position standard deviations of the estimate, m (first M entries).
     pub fn filter(&self, capsule: usize) -> Option<&CapsuleFilter> {
         (capsule < NX / 2).then(|| &self.est.filters[capsule])
+    }
+
+    /// The estimate of capsule `capsule`'s gain and drag factors against
+    /// the model (mean and covariance; 1 = the model), as the estimator and
+    /// the refinement use them.
+    pub fn model_factors(&self, capsule: usize) -> Option<&ScaleEstimate> {
+        (capsule < NX / 2).then(|| &self.est.scales[capsule])
     }
 
     /// Sets a new target `[x1, v1, x2, v2, ...]`: positions inside the
@@ -500,6 +507,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && half_spread_m(e, 0.0) <= s.hold_release_position_m
                 && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
                 && centre_m <= HOLD_CENTRE_ENTER_M
+                && (s.sampling == Sampling::Ideal
+                    || self
+                        .law
+                        .station
+                        .can_stop(e, S::DT_S, self.hold_gap_s(), HOLD_STOP_SPREAD_M))
         };
         if !was && holding {
             self.law.station.start();

@@ -6,7 +6,8 @@ use crate::metrics::Metrics;
 use crate::mismatch::PlantMismatch;
 use crate::plant::{Phase, Plant};
 use crate::report::{
-    FrameCounts, MeasurementRecord, ModeChange, ModelParams, PlantReport, RunReport, TierCycles,
+    FactorEstimate, FrameCounts, MeasurementRecord, ModeChange, ModelParams, PlantReport,
+    RunReport, TierCycles,
 };
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
@@ -460,6 +461,17 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     report.fallback_cycles = Some(statuses.fallback);
     if opts.sampling != Sampling::Ideal {
         report.frames = Some(statuses.frames);
+        report.estimated_factors = Some(
+            (0..NX / 2)
+                .filter_map(|i| ctl.model_factors(i))
+                .map(|f| FactorEstimate {
+                    gain: f.mean[0],
+                    gain_std: f.cov[0].max(0.0).sqrt(),
+                    drag: f.mean[1],
+                    drag_std: f.cov[3].max(0.0).sqrt(),
+                })
+                .collect(),
+        );
     }
     report.tier_cycles = Some(TierCycles {
         explicit: statuses.explicit,

@@ -104,6 +104,20 @@ pub struct RunReport {
     /// fallback), in order.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub modes: Option<Vec<ModeChange>>,
+    /// The controller's estimate of each capsule's gain and drag factors
+    /// against the model at the end of the run (scanner-cycle samplings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimated_factors: Option<Vec<FactorEstimate>>,
+}
+
+/// One capsule's estimated factors on its gain and drag (1 = the model),
+/// with their standard deviations.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FactorEstimate {
+    pub gain: f64,
+    pub gain_std: f64,
+    pub drag: f64,
+    pub drag_std: f64,
 }
 
 /// One entry of the mode timeline.
@@ -158,6 +172,7 @@ impl RunReport {
             fallback_cycles: None,
             tier_cycles: None,
             modes: None,
+            estimated_factors: None,
             frames: None,
             disturbance: None,
             seed: None,

@@ -226,6 +226,7 @@ mod tests {
             plant: None,
             frames: None,
             modes: None,
+            estimated_factors: None,
         }
     }
 }

@@ -272,9 +272,18 @@ pub const MAX_ABS_POSITION_M: f64 = 1.0;
 /// integrated there: its RK4 prediction overflows to NaN from about 2 m/s,
 /// and a NaN estimate would reject every later frame.
 pub const MAX_ABS_SPEED_M_PER_S: f64 = 1.0;
-/// Floor on the estimator's process noise (acceleration PSD, (m/s^2)^2 s):
-/// model error is never exactly zero.
-pub const MIN_ACCEL_PSD: f64 = 1.0e-6;
+/// Most process noise (acceleration PSD, (m/s^2)^2 s) the model's error
+/// adds to a capsule's filter (`ScaleEstimate::model_error_psd`): more
+/// would let the estimate follow the frames' noise during manoeuvres. Also
+/// the process noise of the re-acquisition candidate and the replaced
+/// track, which know nothing of the factors.
+pub const MODEL_ERROR_MAX_ACCEL_PSD: f64 = 1.0e-6;
+/// Least process noise of a capsule's filter, (m/s^2)^2 s: near rest the
+/// model's error vanishes with the magnetic and drag accelerations, and
+/// the frames then tell the relative speed to about 0.1 mm/s (the hold's
+/// entry test needs it; with the 1e-6 floor everywhere it was off by
+/// 0.35 mm/s RMS).
+pub const REST_ACCEL_PSD: f64 = 1.0e-9;
 
 /// Every name `RuntimeError::BadSetting` can carry (the settings that are
 /// range-checked), for hosts and tests that map errors back to fields.
@@ -348,3 +357,6 @@ pub(super) fn check_settings(
     }
     Ok(())
 }
+/// Where the hold must be able to stop the capsules' relative motion
+/// (`StationKeeper::can_stop`) for it to be entered: relative position, m.
+pub const HOLD_STOP_SPREAD_M: f64 = 2.0e-3;

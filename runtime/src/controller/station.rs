@@ -101,6 +101,29 @@ impl<const NX: usize> StationKeeper<NX> {
         }
     }
 
+    /// Whether the dither can stop the capsules' relative motion in `e`
+    /// (along the drag direction) with their relative position, where it
+    /// stops, within `spread_m`: braking at its full authority
+    /// (`STATION_MAX_SPEED_M_PER_S`), the relative position stops at
+    /// `q + w |w| / (2 a)`. A relative motion that would stop beyond it
+    /// leaves the band whatever the hold does. Capsules without
+    /// differential drag: true (the hold cannot do better or worse).
+    pub fn can_stop(&self, e: &[f64; NX], dt_s: f64, gap_s: f64, spread_m: f64) -> bool {
+        let (mut xi, mut rate, mut reach) = (0.0, 0.0, 0.0);
+        for i in 0..NX / 2 {
+            xi += self.direction[i] * e[2 * i];
+            rate += self.direction[i] * e[2 * i + 1];
+            // Each capsule's share of the spread, in the direction's units.
+            reach += libm::fabs(self.direction[i]) * 0.5 * spread_m;
+        }
+        if reach == 0.0 {
+            return true;
+        }
+        let kappa = pattern_drag_gain(dt_s, gap_s);
+        let limit = kappa * STATION_MAX_SPEED_M_PER_S * STATION_MAX_SPEED_M_PER_S;
+        libm::fabs(xi + rate * libm::fabs(rate) / (2.0 * limit)) <= reach
+    }
+
     /// Forgets the learned bias (new target or new start).
     pub fn forget(&mut self) {
         self.integral = 0.0;

@@ -353,7 +353,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     pub(super) fn predict_filters(&mut self, u: f64, duration_s: f64) {
         let gamma = self.settings.disturbance_bound;
         // A disturbance of bound gamma, read as white noise over one sample.
-        let accel_psd = (gamma * gamma * S::DT_S).max(MIN_ACCEL_PSD);
+        let accel_psd = (gamma * gamma * S::DT_S).max(MODEL_ERROR_MAX_ACCEL_PSD);
         let vel_psd = gamma * gamma * S::DT_S;
         let applied = self.est.applied_scales;
         let predict = |filters: &mut [CapsuleFilter]| {
@@ -380,7 +380,20 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             ];
             self.est.scales[i].predict(a, b, duration_s);
         }
-        predict(&mut self.est.filters[..m]);
+        for i in 0..m {
+            let f = &mut self.est.filters[i];
+            let (next, a) = S::capsule_transition_scaled(i, f.mean, u, duration_s, applied[i]);
+            let psd = self.est.scales[i].model_error_psd(
+                applied[i],
+                S::capsule_gain(i) * u,
+                S::capsule_drag(i, f.mean[1]),
+                S::DT_S,
+            );
+            let psd = psd
+                .clamp(REST_ACCEL_PSD, MODEL_ERROR_MAX_ACCEL_PSD)
+                .max(gamma * gamma * S::DT_S);
+            f.predict(next, a, duration_s, psd, vel_psd);
+        }
         if self.est.candidate_frames > 0 {
             predict(&mut self.est.candidate[..m]);
         }
