@@ -380,11 +380,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             ];
             self.est.scales[i].predict(a, b, duration_s);
         }
-        for i in 0..m {
+        for (i, &scale) in applied.iter().enumerate().take(m) {
             let f = &mut self.est.filters[i];
-            let (next, a) = S::capsule_transition_scaled(i, f.mean, u, duration_s, applied[i]);
+            let (next, a) = S::capsule_transition_scaled(i, f.mean, u, duration_s, scale);
             let psd = self.est.scales[i].model_error_psd(
-                applied[i],
+                scale,
                 S::capsule_gain(i) * u,
                 S::capsule_drag(i, f.mean[1]),
                 S::DT_S,

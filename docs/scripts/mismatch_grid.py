@@ -1,0 +1,67 @@
+#!/usr/bin/env python3
+"""The model-mismatch grid of docs/known-limits.md.
+
+24 targets (+-4 cm, 2 cm steps) x seeds 1..N (default 8), the paper
+disturbance, 6 s runs, strict settle, both scanner samplings, on the model
+and five plants off it. Per row: unsettled runs, median / 90th percentile /
+worst settle (9.00 stands for never) and the true frames rejected.
+
+    cargo build --release
+    python3 docs/scripts/mismatch_grid.py target/release/capsule-mpc [N]
+"""
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+
+NEVER_S = 9.0
+PLANTS = [
+    ("model", []),
+    ("drag x0.8", ["--plant-drag-scale", "0.8"]),
+    ("drag x1.2", ["--plant-drag-scale", "1.2"]),
+    ("drag (x1.2, x0.8)", ["--plant-drag-scale", "1.2,0.8"]),
+    ("gain x0.9", ["--plant-gain-scale", "0.9"]),
+    ("gain x1.1", ["--plant-gain-scale", "1.1"]),
+]
+STEPS_M = (-0.04, -0.02, 0.0, 0.02, 0.04)
+TARGETS = [(a, b) for a in STEPS_M for b in STEPS_M if (a, b) != (0.0, 0.0)]
+
+
+def run(binary, sampling, extra, target, seed):
+    fd, path = tempfile.mkstemp(suffix=".json")
+    os.close(fd)
+    try:
+        subprocess.run(
+            [binary, "simulate", "--target", f"{target[0]},0,{target[1]},0",
+             "--sampling", sampling, "--disturbance", "paper", "--seed", str(seed),
+             "--duration", "6", "--json", path] + extra,
+            check=True, capture_output=True)
+        with open(path) as f:
+            d = json.load(f)
+    finally:
+        os.remove(path)
+    return d["metrics"]["settle_time_s"], d["frames"]["rejected"], d["frames"]["received"]
+
+
+def main():
+    binary = sys.argv[1]
+    seeds = range(1, int(sys.argv[2]) + 1) if len(sys.argv) > 2 else range(1, 9)
+    for sampling in ("constant", "variable"):
+        for name, extra in PLANTS:
+            jobs = [(binary, sampling, extra, t, s) for t in TARGETS for s in seeds]
+            with ThreadPoolExecutor(2) as ex:
+                res = list(ex.map(lambda a: run(*a), jobs))
+            settle = sorted(NEVER_S if s is None else s for s, _, _ in res)
+            unsettled = sum(1 for s, _, _ in res if s is None)
+            rejected = sum(r for _, r, _ in res)
+            received = sum(n for _, _, n in res)
+            print(f"{sampling:8s} {name:18s} unsettled {unsettled:3d}/{len(res)} "
+                  f"median {statistics.median(settle):.2f} p90 {settle[int(0.9 * len(settle))]:.2f} "
+                  f"worst {settle[-1]:.2f} s | rejected {rejected}/{received} frames", flush=True)
+
+
+if __name__ == "__main__":
+    main()
