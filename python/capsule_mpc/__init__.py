@@ -131,8 +131,12 @@ class Run:
     """One closed-loop run: ``t`` (T,), ``x`` (T, 2M) true states, ``u`` (T,)
     gradients (``u[k]`` holds from ``t[k]`` to ``t[k+1]``), ``phase`` (T,)
     strings ('track' or 'actuate'), ``measurements`` (list of dicts),
-    ``metrics`` (the CLI's metrics, same keys and values); ``to_json()`` is
-    the CLI's JSON."""
+    ``metrics`` (the CLI's metrics, same keys and values), ``modes`` (the
+    controller's mode timeline: dicts with ``t_s`` and ``mode``),
+    ``estimated_factors`` (scanner samplings: per capsule, the controller's
+    estimate of its gain and drag factors against the model, with standard
+    deviations; None under ideal sampling); ``to_json()`` is the CLI's
+    JSON."""
 
     def __init__(self, text: str):
         self._json = text
@@ -146,6 +150,8 @@ class Run:
         self.target = np.asarray(d["target"], dtype=float)
         self.frames = d.get("frames")
         self.plant = d.get("plant")
+        self.modes = d.get("modes") or []
+        self.estimated_factors = d.get("estimated_factors")
 
     @property
     def settle_time_s(self) -> Optional[float]:

@@ -42,6 +42,8 @@ class Run:
     target: np.ndarray
     frames: Optional[Dict]
     plant: Optional[Dict]
+    modes: List[Dict]
+    estimated_factors: Optional[List[Dict]]
     @property
     def settle_time_s(self) -> Optional[float]: ...
     def to_json(self) -> str: ...

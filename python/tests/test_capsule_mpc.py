@@ -119,6 +119,20 @@ def test_plant_off_the_model_is_recorded():
         cm.simulate([0.02, 0.03], plant_drag_scale=[1.0, 1.0, 1.0])
 
 
+def test_the_controller_learns_a_plant_off_the_model():
+    # Drag x0.8 on both capsules: after a 6 s run the estimated drag factors
+    # are within 0.1 of the truth and closer to it than to the model's 1;
+    # the mode timeline starts planning and ends in the hold.
+    run = cm.simulate([0.02, 0.03], sampling="constant", duration_s=6.0, plant_drag_scale=0.8)
+    factors = run.estimated_factors
+    assert len(factors) == 2
+    for f in factors:
+        assert abs(f["drag"] - 0.8) < 0.1 and abs(f["drag"] - 0.8) < abs(f["drag"] - 1.0), factors
+        assert f["drag_std"] > 0.0
+    assert run.modes[0]["mode"] == "plan" and run.modes[-1]["mode"] == "hold", run.modes
+    assert cm.simulate([0.02, 0.03], sampling="ideal", duration_s=1.0).estimated_factors is None
+
+
 def test_reach_map_grids():
     m = cm.reach(range_cm=2.0, step_cm=1.0)
     assert m.summary["targets"] == 24 and m.summary["refused"] == 0

@@ -104,17 +104,19 @@ pub fn grid_targets(start_m: &[f64], range_m: f64, step_m: f64) -> Result<Vec<Ve
     if !(step_m.is_finite() && step_m > 0.0 && range_m.is_finite() && range_m >= 0.0) {
         bail!("reach grid: range {range_m} m and step {step_m} m must be finite, step > 0");
     }
-    let half = (range_m / step_m + 1e-9).floor() as i64;
-    let per_axis = (2 * half + 1) as usize;
-    let count = per_axis
-        .checked_pow(start_m.len() as u32)
-        .unwrap_or(usize::MAX);
-    if count > MAX_REACH_TARGETS {
+    // Counted in floating point: a tiny step must get the error, not an
+    // overflowed count.
+    let half_f = (range_m / step_m + 1e-9).floor();
+    let count_f = (2.0 * half_f + 1.0).powi(start_m.len() as i32);
+    if count_f > MAX_REACH_TARGETS as f64 {
         bail!(
-            "reach grid: {count} targets (range {range_m} m, step {step_m} m, {} capsules) exceed {MAX_REACH_TARGETS}; use a larger step",
+            "reach grid: {count_f:.3e} targets (range {range_m} m, step {step_m} m, {} capsules) exceed {MAX_REACH_TARGETS}; use a larger step",
             start_m.len()
         );
     }
+    let half = half_f as i64;
+    let per_axis = (2 * half + 1) as usize;
+    let count = per_axis.pow(start_m.len() as u32);
     let mut targets = Vec::with_capacity(count);
     for flat in 0..count {
         let mut rest = flat;
@@ -290,7 +292,14 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("exceed"), "{err}");
+        assert!(err.contains("1.440e8 targets"), "{err}");
         assert!(grid_targets(&[0.0], 0.01, 0.0).is_err());
+        // A step so small that the count overflows any integer: still the
+        // error with its (floating-point) size.
+        let err = grid_targets(&[0.0, 0.0], 0.04, 1e-120)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("6.400e237 targets"), "{err}");
     }
 
     #[test]
