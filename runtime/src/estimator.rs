@@ -294,6 +294,30 @@ mod tests {
         assert!(worst_late[1] < 3.0 * f.speed_std_m_per_s() + 1e-4);
     }
 
+    /// The model's error as process noise: zero acceleration, zero noise
+    /// (the floor is the caller's); it grows with the magnetic and drag
+    /// accelerations and with the factors' uncertainty, and counts a factor
+    /// estimated away from the one predicted with.
+    #[test]
+    fn model_error_psd_follows_the_accelerations_and_the_factors() {
+        let s = ScaleEstimate::new(0.1, 0.2);
+        assert_eq!(s.model_error_psd([1.0, 1.0], 0.0, 0.0, 0.02), 0.0);
+        // 0.1 x 7 m/s^2 (gain x u_max) + 0.2 x 0.5 m/s^2 of drag, over 20 ms.
+        let moving = s.model_error_psd([1.0, 1.0], 7.0, 0.5, 0.02);
+        assert!((moving - 0.8f64.powi(2) * 0.02).abs() < 1e-12, "{moving}");
+        let near_rest = s.model_error_psd([1.0, 1.0], 0.02, 3e-3, 0.02);
+        assert!(near_rest < 1e-4 * moving, "{near_rest} vs {moving}");
+        let mut learned = s;
+        learned.cov = [1e-4, 0.0, 0.0, 1e-4];
+        assert!(learned.model_error_psd([1.0, 1.0], 7.0, 0.5, 0.02) < 0.01 * moving);
+        learned.mean = [1.0, 0.8];
+        let off = learned.model_error_psd([1.0, 1.0], 0.0, 0.5, 0.02);
+        assert!(
+            (off - (0.21f64 * 0.5).powi(2) * 0.02).abs() < 1e-12,
+            "{off}"
+        );
+    }
+
     /// A lost measurement: predict only, the uncertainty widens, the next
     /// measurement shrinks it again.
     #[test]

@@ -6,9 +6,13 @@
 //!
 //! Asserted: the frame gate takes a capsule off the model for what it is,
 //! not for a tracking glitch (at most 1 % of the true frames rejected on
-//! every plant), and the nominal plant settles every run. Printed: settled
-//! runs and settle times per plant (docs/known-limits.md quotes them: the
-//! end game off the model is slow, the open part of issue 26).
+//! every plant); the nominal plant settles every run, within 2.0 s
+//! (measured worst 1.46 s constant, 1.76 s variable); off the model at
+//! most one of the 32 runs per plant and sampling is unsettled at 6 s and
+//! the median is at most 1.7 x the nominal one (measured: at most 1
+//! unsettled; medians up to 1.43 x constant, 1.62 x variable).
+//! Issue 26 asks for every run and 1.3 x: not met yet. Printed: settled
+//! runs and settle times per plant (docs/known-limits.md quotes them).
 
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling};
@@ -96,6 +100,17 @@ fn off_model_capsules_settle_near_the_nominal_times() {
                 assert_eq!(
                     unsettled, 0,
                     "{sampling:?}: the nominal plant left {unsettled} runs unsettled"
+                );
+                assert!(worst <= 2.0, "{sampling:?}: nominal worst {worst} s");
+            } else {
+                assert!(
+                    unsettled <= 1,
+                    "{sampling:?} {name}: {unsettled} of 32 runs unsettled"
+                );
+                assert!(
+                    med <= 1.7 * nominal.0,
+                    "{sampling:?} {name}: median {med} s against the nominal {} s",
+                    nominal.0
                 );
             }
             assert!(

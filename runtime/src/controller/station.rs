@@ -299,6 +299,40 @@ mod tests {
         }
     }
 
+    /// The hold's entry test: with the default capsules' drag (a =
+    /// kappa * 118 1/m * (3 mm/s)^2, about 1.2e-4 m/s^2 at ideal sampling)
+    /// a relative speed stops within w^2 / (2 a): 0.3 mm/s at q = 0 stops
+    /// within 2 mm, 1 mm/s does not; the stopping point counts the side
+    /// the capsules move to (converging at 1 mm/s from 1.5 mm apart stops
+    /// 2.8 mm past zero; diverging at 0.4 mm/s from 1.5 mm, at 2.2 mm);
+    /// without differential drag the test never refuses.
+    #[test]
+    fn can_stop_is_the_stopping_point_of_the_relative_motion() {
+        let s = StationKeeper::<4>::new(&[134.7, 16.8]);
+        let (dt, gap, spread) = (0.02, 0.0, 2.0e-3);
+        let state = |q: f64, w: f64| [0.5 * q, 0.5 * w, -0.5 * q, -0.5 * w];
+        assert!(s.can_stop(&state(0.0, 0.3e-3), dt, gap, spread));
+        assert!(s.can_stop(&state(0.0, -0.3e-3), dt, gap, spread));
+        assert!(!s.can_stop(&state(0.0, 1.0e-3), dt, gap, spread));
+        let a = pattern_drag_gain(dt, gap)
+            * (134.7 - 16.8)
+            * STATION_MAX_SPEED_M_PER_S
+            * STATION_MAX_SPEED_M_PER_S;
+        let w_max = libm::sqrt(2.0 * a * spread);
+        assert!(s.can_stop(&state(0.0, 0.99 * w_max), dt, gap, spread));
+        assert!(!s.can_stop(&state(0.0, 1.01 * w_max), dt, gap, spread));
+        // Converging: from +1.5 mm at -0.6 mm/s the stopping point is
+        // 1.5 - 0.36e-6 / (2 a) mm, inside; at -1 mm/s it is beyond -2 mm.
+        assert!(s.can_stop(&state(1.5e-3, -0.6e-3), dt, gap, spread));
+        assert!(!s.can_stop(&state(1.5e-3, -1.0e-3), dt, gap, spread));
+        // Diverging: 0.4 mm/s, which converging would stop inside, is
+        // refused.
+        assert!(s.can_stop(&state(1.5e-3, -0.4e-3), dt, gap, spread));
+        assert!(!s.can_stop(&state(1.5e-3, 0.4e-3), dt, gap, spread));
+        let same = StationKeeper::<4>::new(&[50.0, 50.0]);
+        assert!(same.can_stop(&state(1.5e-3, 5.0e-3), dt, gap, spread));
+    }
+
     /// Two capsules, the first with more drag: a relative error with the
     /// first ahead asks for the fast phase forward (more drag on it, so it
     /// falls back), and the dither's displacement returns to zero.
