@@ -378,10 +378,10 @@ fn short_moves_settle_within_the_issue_deadlines() {
 /// improvement can tighten them (docs/results.md, "Acceptance over the
 /// workspace"):
 /// minimum time of 1 s or more (far and chained moves): constant sampling
-/// worst 0.53 s over bound + 1.5 s ((-5, 2) cm, constant bias, seed 1);
-/// variable sampling worst 0.54 s over bound + 1.0 s ((5, 5) cm, constant
-/// bias, seed 5; 0.36 s before the one-sample finish of short plans);
-/// every run settles and holds 1 s before the run ends (deadline + 3 s).
+/// within bound + 1.5 s (worst -0.06 s; asserted <= +0.1 s); variable
+/// sampling worst +0.50 s over bound + 1.0 s ((0, 0) -> (5, 5) cm, random
+/// disturbance, seed 8; asserted <= +0.65 s); every run settles and holds
+/// 1 s before the run ends (deadline + 3 s).
 #[test]
 fn measured_worst_settling_where_the_issue_thresholds_fail() {
     let grid = settling_grid();
@@ -417,7 +417,7 @@ fn measured_worst_settling_where_the_issue_thresholds_fail() {
     let (_, excess, never) = worst(Sampling::Constant, true);
     assert_eq!(never, 0);
     assert!(
-        excess <= 0.65,
+        excess <= 0.1,
         "constant, far moves: worst excess {excess} s"
     );
     let (_, excess, never) = worst(Sampling::Variable, true);

@@ -34,8 +34,8 @@
  * 20 ms time (constant sampling 2.16 s against 1.08 s, variable 2.58 s
  * against 1.00 s); at 100 ms it does not settle within 6 s. Not every
  * target is as good: over a 1 cm grid in +-5 cm (plant simulator, 0.2 mm
- * noise, the paper's disturbance, seeds 1-2), 60 ms gaps leave 26 of 240
- * runs unsettled after 8 s under constant sampling and 4 of 240 under
+ * noise, the paper's disturbance, seeds 1-2), 60 ms gaps leave 5 of 240
+ * runs unsettled after 8 s under constant sampling and none of 240 under
  * variable sampling (docs/known-limits.md). Longer gaps are accepted (up
  * to the 1 s below) but not proven to settle. A measurement more than 1 ms before the end
  * of the last actuation phase (time going backwards) or more than 1 s after

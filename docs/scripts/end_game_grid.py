@@ -10,39 +10,23 @@ first entering it.
     cargo build --release
     python3 docs/scripts/end_game_grid.py target/release/capsule-mpc
 """
-import json
-import os
 import statistics
-import subprocess
 import sys
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
 
-NEVER_S = 9.0
+from grid_runs import NEVER_S, TARGETS, simulate
+
 PLANTS = [
     ("model", []),
     ("drag x0.8", ["--plant-drag-scale", "0.8"]),
     ("gain x0.9", ["--plant-gain-scale", "0.9"]),
     ("drag (x1.2, x0.8)", ["--plant-drag-scale", "1.2,0.8"]),
 ]
-STEPS_M = (-0.04, -0.02, 0.0, 0.02, 0.04)
-TARGETS = [(a, b) for a in STEPS_M for b in STEPS_M if (a, b) != (0.0, 0.0)]
 SEEDS = (1, 2)
 
 
 def run(binary, sampling, extra, target, seed):
-    fd, path = tempfile.mkstemp(suffix=".json")
-    os.close(fd)
-    try:
-        subprocess.run(
-            [binary, "simulate", "--target", f"{target[0]},0,{target[1]},0",
-             "--sampling", sampling, "--disturbance", "paper", "--seed", str(seed),
-             "--duration", "6", "--json", path] + extra,
-            check=True, capture_output=True)
-        with open(path) as f:
-            m = json.load(f)["metrics"]
-    finally:
-        os.remove(path)
+    m = simulate(binary, sampling, extra, target, seed)["metrics"]
     return m["first_in_band_s"], m["settle_time_s"]
 
 

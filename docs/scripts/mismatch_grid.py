@@ -9,15 +9,12 @@ worst settle (9.00 stands for never) and the true frames rejected.
     cargo build --release
     python3 docs/scripts/mismatch_grid.py target/release/capsule-mpc [N]
 """
-import json
-import os
 import statistics
-import subprocess
 import sys
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
 
-NEVER_S = 9.0
+from grid_runs import NEVER_S, TARGETS, simulate
+
 PLANTS = [
     ("model", []),
     ("drag x0.8", ["--plant-drag-scale", "0.8"]),
@@ -26,23 +23,10 @@ PLANTS = [
     ("gain x0.9", ["--plant-gain-scale", "0.9"]),
     ("gain x1.1", ["--plant-gain-scale", "1.1"]),
 ]
-STEPS_M = (-0.04, -0.02, 0.0, 0.02, 0.04)
-TARGETS = [(a, b) for a in STEPS_M for b in STEPS_M if (a, b) != (0.0, 0.0)]
 
 
 def run(binary, sampling, extra, target, seed):
-    fd, path = tempfile.mkstemp(suffix=".json")
-    os.close(fd)
-    try:
-        subprocess.run(
-            [binary, "simulate", "--target", f"{target[0]},0,{target[1]},0",
-             "--sampling", sampling, "--disturbance", "paper", "--seed", str(seed),
-             "--duration", "6", "--json", path] + extra,
-            check=True, capture_output=True)
-        with open(path) as f:
-            d = json.load(f)
-    finally:
-        os.remove(path)
+    d = simulate(binary, sampling, extra, target, seed)
     return d["metrics"]["settle_time_s"], d["frames"]["rejected"], d["frames"]["received"]
 
 

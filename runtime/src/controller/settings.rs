@@ -155,6 +155,11 @@ pub const HOLD_SETTLING_S: f64 = 0.5;
 pub const HOLD_EARLY_EXIT_MAX_CAPSULES: usize = 2;
 /// How far ahead the hold entry extrapolates the capsules' relative drift, s.
 pub const HOLD_DRIFT_HORIZON_S: f64 = 1.0;
+/// Under the scanner cycle the hold is entered only where its station
+/// keeping can stop the capsules' relative motion with their relative
+/// position within this, m (`StationKeeper::can_stop`; 1.4, 3 and 4 mm
+/// measured worse, docs/decisions.md).
+pub const HOLD_STOP_SPREAD_M: f64 = 2.0e-3;
 /// The hold is entered only while the group's centre (midpoint of the
 /// extreme position errors) is within this distance of the target, m: the
 /// hold law (critically damped at `HOLD_NATURAL_FREQUENCY_RAD_PER_S`) then
@@ -280,9 +285,8 @@ pub const MAX_ABS_SPEED_M_PER_S: f64 = 1.0;
 pub const MODEL_ERROR_MAX_ACCEL_PSD: f64 = 1.0e-6;
 /// Least process noise of a capsule's filter, (m/s^2)^2 s: near rest the
 /// model's error vanishes with the magnetic and drag accelerations, and
-/// the frames then tell the relative speed to about 0.1 mm/s (the hold's
-/// entry test needs it; with the 1e-6 floor everywhere it was off by
-/// 0.35 mm/s RMS).
+/// the frames then tell the relative speed to about 0.13 mm/s RMS in the
+/// hold, which its entry test needs (a 1e-6 floor leaves 0.35 mm/s).
 pub const REST_ACCEL_PSD: f64 = 1.0e-9;
 
 /// Every name `RuntimeError::BadSetting` can carry (the settings that are
@@ -357,6 +361,3 @@ pub(super) fn check_settings(
     }
     Ok(())
 }
-/// Where the hold must be able to stop the capsules' relative motion
-/// (`StationKeeper::can_stop`) for it to be entered: relative position, m.
-pub const HOLD_STOP_SPREAD_M: f64 = 2.0e-3;

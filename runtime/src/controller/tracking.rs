@@ -353,8 +353,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     pub(super) fn predict_filters(&mut self, u: f64, duration_s: f64) {
         let gamma = self.settings.disturbance_bound;
         // A disturbance of bound gamma, read as white noise over one sample.
-        let accel_psd = (gamma * gamma * S::DT_S).max(MODEL_ERROR_MAX_ACCEL_PSD);
-        let vel_psd = gamma * gamma * S::DT_S;
+        let disturbance_psd = gamma * gamma * S::DT_S;
+        // The re-acquisition candidate and the replaced track know nothing
+        // of the factors: the most the model's error adds.
+        let accel_psd = disturbance_psd.max(MODEL_ERROR_MAX_ACCEL_PSD);
+        let vel_psd = disturbance_psd;
         let applied = self.est.applied_scales;
         let predict = |filters: &mut [CapsuleFilter]| {
             for (i, f) in filters.iter_mut().enumerate() {
@@ -391,7 +394,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             );
             let psd = psd
                 .clamp(REST_ACCEL_PSD, MODEL_ERROR_MAX_ACCEL_PSD)
-                .max(gamma * gamma * S::DT_S);
+                .max(disturbance_psd);
             f.predict(next, a, duration_s, psd, vel_psd);
         }
         if self.est.candidate_frames > 0 {

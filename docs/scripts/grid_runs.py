@@ -1,0 +1,27 @@
+"""What the grid scripts share: the 24-target grid (+-4 cm, 2 cm steps)
+and one `capsule-mpc simulate` run (paper disturbance, 6 s) read back
+from its JSON report."""
+import json
+import os
+import subprocess
+import tempfile
+
+NEVER_S = 9.0
+STEPS_M = (-0.04, -0.02, 0.0, 0.02, 0.04)
+TARGETS = [(a, b) for a in STEPS_M for b in STEPS_M if (a, b) != (0.0, 0.0)]
+
+
+def simulate(binary, sampling, extra, target, seed):
+    """The JSON report of one 6 s run to `target` (two positions, m)."""
+    fd, path = tempfile.mkstemp(suffix=".json")
+    os.close(fd)
+    try:
+        subprocess.run(
+            [binary, "simulate", "--target", f"{target[0]},0,{target[1]},0",
+             "--sampling", sampling, "--disturbance", "paper", "--seed", str(seed),
+             "--duration", "6", "--json", path] + extra,
+            check=True, capture_output=True)
+        with open(path) as f:
+            return json.load(f)
+    finally:
+        os.remove(path)
