@@ -494,28 +494,42 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let was = self.sup.mode == Mode::Hold;
         let spread_m = half_spread_m(e, 0.0);
         let outside = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > s.hold_release_position_m);
+        // The dither's authority with the learned drag factors, never more
+        // than the model's (a larger one would admit arrivals on a guess).
+        let mut drag = capsule_drags::<S, NX, K>();
+        for (b, scale) in drag.iter_mut().zip(self.est.applied_scales.iter()) {
+            *b *= scale[1];
+        }
+        let authority = self.law.station.drag_authority(&drag[..NX / 2]).min(1.0);
+        // Ideal sampling knows the state exactly and acts every sample:
+        // there the centre law adds differential drag of its own (about
+        // twice the dither's authority measured) and the test would refuse
+        // arrivals the hold keeps.
+        let can_stop = |spread_m: f64| {
+            s.sampling == Sampling::Ideal
+                || self
+                    .law
+                    .station
+                    .can_stop(e, S::DT_S, self.hold_gap_s(), spread_m, authority)
+        };
+        let settling = self.law.station.held_s() < HOLD_SETTLING_S;
         let holding = if was {
             slow(s.hold_release_speed_m_per_s)
                 && spread_m <= s.hold_release_position_m
                 && !(NX / 2 <= HOLD_EARLY_EXIT_MAX_CAPSULES
                     && outside
                     && spread_m > HOLD_SPREAD_EXIT_M
-                    && self.law.station.held_s() >= HOLD_SETTLING_S)
+                    && !settling)
                 && centre_m <= HOLD_CENTRE_RELEASE_M
+                // The frames after entry tell the relative speed better
+                // than the one the entry was decided on.
+                && (!settling || can_stop(HOLD_CONFIRM_SPREAD_M))
         } else {
             slow(s.hold_enter_speed_m_per_s)
                 && half_spread_m(e, 0.0) <= s.hold_release_position_m
                 && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
                 && centre_m <= HOLD_CENTRE_ENTER_M
-                // Ideal sampling knows the state exactly and acts every
-                // sample: there the centre law adds differential drag of
-                // its own (about twice the dither's authority measured)
-                // and the test would refuse arrivals the hold keeps.
-                && (s.sampling == Sampling::Ideal
-                    || self
-                        .law
-                        .station
-                        .can_stop(e, S::DT_S, self.hold_gap_s(), HOLD_STOP_SPREAD_M))
+                && can_stop(HOLD_STOP_SPREAD_M)
         };
         if !was && holding {
             self.law.station.start();

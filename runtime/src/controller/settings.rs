@@ -160,6 +160,13 @@ pub const HOLD_DRIFT_HORIZON_S: f64 = 1.0;
 /// position within this, m (`StationKeeper::can_stop`; 1.4, 3 and 4 mm
 /// measured worse, docs/decisions.md).
 pub const HOLD_STOP_SPREAD_M: f64 = 2.0e-3;
+/// While the hold is settling (`HOLD_SETTLING_S`) it is left when the
+/// relative motion, as the frames since entry tell it, would stop beyond
+/// this spread, m: the estimate at entry can miss a relative speed the
+/// model did not predict (capsules off the model) by a few mm/s, and the
+/// dither then only watches it drift for seconds. 2 mm (the entry's) and
+/// 3 mm also left holds that would have settled (docs/decisions.md).
+pub const HOLD_CONFIRM_SPREAD_M: f64 = 4.0e-3;
 /// The hold is entered only while the group's centre (midpoint of the
 /// extreme position errors) is within this distance of the target, m: the
 /// hold law (critically damped at `HOLD_NATURAL_FREQUENCY_RAD_PER_S`) then

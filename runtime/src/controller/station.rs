@@ -108,7 +108,14 @@ impl<const NX: usize> StationKeeper<NX> {
     /// `q + w |w| / (2 a)`. A relative motion that would stop beyond it
     /// leaves the band whatever the hold does. Capsules without
     /// differential drag: true (the hold cannot do better or worse).
-    pub fn can_stop(&self, e: &[f64; NX], dt_s: f64, gap_s: f64, spread_m: f64) -> bool {
+    pub fn can_stop(
+        &self,
+        e: &[f64; NX],
+        dt_s: f64,
+        gap_s: f64,
+        spread_m: f64,
+        authority: f64,
+    ) -> bool {
         let (mut xi, mut rate, mut reach) = (0.0, 0.0, 0.0);
         for i in 0..NX / 2 {
             xi += self.direction[i] * e[2 * i];
@@ -120,8 +127,22 @@ impl<const NX: usize> StationKeeper<NX> {
             return true;
         }
         let kappa = pattern_drag_gain(dt_s, gap_s);
-        let limit = kappa * STATION_MAX_SPEED_M_PER_S * STATION_MAX_SPEED_M_PER_S;
+        let limit = authority * kappa * STATION_MAX_SPEED_M_PER_S * STATION_MAX_SPEED_M_PER_S;
         libm::fabs(xi + rate * libm::fabs(rate) / (2.0 * limit)) <= reach
+    }
+
+    /// The dither's relative authority with drags `drag` (1/m, per
+    /// capsule) against the model's it was built from: 1 on the model,
+    /// less where the differential drag is smaller (capsules off the model
+    /// with their learned drag factors).
+    pub fn drag_authority(&self, drag: &[f64]) -> f64 {
+        self.direction
+            .iter()
+            .zip(drag)
+            .take(NX / 2)
+            .map(|(d, b)| d * b)
+            .sum::<f64>()
+            .max(0.0)
     }
 
     /// Forgets the learned bias (new target or new start).
@@ -307,30 +328,45 @@ mod tests {
     /// 2.8 mm past zero; diverging at 0.4 mm/s from 1.5 mm, at 2.2 mm);
     /// without differential drag the test never refuses.
     #[test]
+    fn drag_authority_is_the_differential_drag_against_the_model() {
+        let drag = [134.7, 16.8];
+        let s = StationKeeper::<4>::new(&drag);
+        assert!((s.drag_authority(&drag) - 1.0).abs() < 1e-12);
+        assert!((s.drag_authority(&[0.8 * 134.7, 0.8 * 16.8]) - 0.8).abs() < 1e-12);
+        // Only the large drag lower: the difference shrinks by 0.8 x 134.7 / 117.9.
+        let scaled = s.drag_authority(&[0.8 * 134.7, 16.8]);
+        assert!((scaled - (0.8 * 134.7 - 16.8) / (134.7 - 16.8)).abs() < 1e-12);
+        // A weaker authority stops the same relative speed farther out.
+        let state = [0.0, 0.25e-3, 0.0, -0.25e-3];
+        assert!(s.can_stop(&state, 0.02, 0.0, 2.0e-3, 1.0));
+        assert!(!s.can_stop(&state, 0.02, 0.0, 2.0e-3, 0.5));
+    }
+
+    #[test]
     fn can_stop_is_the_stopping_point_of_the_relative_motion() {
         let s = StationKeeper::<4>::new(&[134.7, 16.8]);
         let (dt, gap, spread) = (0.02, 0.0, 2.0e-3);
         let state = |q: f64, w: f64| [0.5 * q, 0.5 * w, -0.5 * q, -0.5 * w];
-        assert!(s.can_stop(&state(0.0, 0.3e-3), dt, gap, spread));
-        assert!(s.can_stop(&state(0.0, -0.3e-3), dt, gap, spread));
-        assert!(!s.can_stop(&state(0.0, 1.0e-3), dt, gap, spread));
+        assert!(s.can_stop(&state(0.0, 0.3e-3), dt, gap, spread, 1.0));
+        assert!(s.can_stop(&state(0.0, -0.3e-3), dt, gap, spread, 1.0));
+        assert!(!s.can_stop(&state(0.0, 1.0e-3), dt, gap, spread, 1.0));
         let a = pattern_drag_gain(dt, gap)
             * (134.7 - 16.8)
             * STATION_MAX_SPEED_M_PER_S
             * STATION_MAX_SPEED_M_PER_S;
         let w_max = libm::sqrt(2.0 * a * spread);
-        assert!(s.can_stop(&state(0.0, 0.99 * w_max), dt, gap, spread));
-        assert!(!s.can_stop(&state(0.0, 1.01 * w_max), dt, gap, spread));
+        assert!(s.can_stop(&state(0.0, 0.99 * w_max), dt, gap, spread, 1.0));
+        assert!(!s.can_stop(&state(0.0, 1.01 * w_max), dt, gap, spread, 1.0));
         // Converging: from +1.5 mm at -0.6 mm/s the stopping point is
         // 1.5 - 0.36e-6 / (2 a) mm, inside; at -1 mm/s it is beyond -2 mm.
-        assert!(s.can_stop(&state(1.5e-3, -0.6e-3), dt, gap, spread));
-        assert!(!s.can_stop(&state(1.5e-3, -1.0e-3), dt, gap, spread));
+        assert!(s.can_stop(&state(1.5e-3, -0.6e-3), dt, gap, spread, 1.0));
+        assert!(!s.can_stop(&state(1.5e-3, -1.0e-3), dt, gap, spread, 1.0));
         // Diverging: 0.4 mm/s, which converging would stop inside, is
         // refused.
-        assert!(s.can_stop(&state(1.5e-3, -0.4e-3), dt, gap, spread));
-        assert!(!s.can_stop(&state(1.5e-3, 0.4e-3), dt, gap, spread));
+        assert!(s.can_stop(&state(1.5e-3, -0.4e-3), dt, gap, spread, 1.0));
+        assert!(!s.can_stop(&state(1.5e-3, 0.4e-3), dt, gap, spread, 1.0));
         let same = StationKeeper::<4>::new(&[50.0, 50.0]);
-        assert!(same.can_stop(&state(1.5e-3, 5.0e-3), dt, gap, spread));
+        assert!(same.can_stop(&state(1.5e-3, 5.0e-3), dt, gap, spread, 1.0));
     }
 
     /// Two capsules, the first with more drag: a relative error with the
