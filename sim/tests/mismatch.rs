@@ -9,8 +9,8 @@
 //! every plant); the nominal plant settles every run, within 2.0 s
 //! (measured worst 1.46 s constant, 1.76 s variable); off the model at
 //! most one of the 32 runs per plant and sampling is unsettled at 6 s and
-//! the median is at most 1.7 x the nominal one (measured: at most 1
-//! unsettled; medians up to 1.43 x constant, 1.62 x variable).
+//! the median is at most 1.6 x the nominal one (measured: at most 1
+//! unsettled; medians up to 1.43 x constant, 1.48 x variable).
 //! Issue 26 asks for every run and 1.3 x: not met yet. Printed: settled
 //! runs and settle times per plant (docs/known-limits.md quotes them).
 
@@ -108,7 +108,7 @@ fn off_model_capsules_settle_near_the_nominal_times() {
                     "{sampling:?} {name}: {unsettled} of 32 runs unsettled"
                 );
                 assert!(
-                    med <= 1.7 * nominal.0,
+                    med <= 1.6 * nominal.0,
                     "{sampling:?} {name}: median {med} s against the nominal {} s",
                     nominal.0
                 );
