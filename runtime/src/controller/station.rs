@@ -106,8 +106,9 @@ impl<const NX: usize> StationKeeper<NX> {
     /// stops, within `spread_m`: braking at its full authority
     /// (`STATION_MAX_SPEED_M_PER_S`), the relative position stops at
     /// `q + w |w| / (2 a)`. A relative motion that would stop beyond it
-    /// leaves the band whatever the hold does. Capsules without
-    /// differential drag: true (the hold cannot do better or worse).
+    /// leaves the band whatever the hold does. `authority` scales a
+    /// (`drag_authority`: 1 on the model). Capsules without differential
+    /// drag: true (the hold cannot do better or worse).
     pub fn can_stop(
         &self,
         e: &[f64; NX],
@@ -127,7 +128,8 @@ impl<const NX: usize> StationKeeper<NX> {
             return true;
         }
         let kappa = pattern_drag_gain(dt_s, gap_s);
-        let limit = authority * kappa * STATION_MAX_SPEED_M_PER_S * STATION_MAX_SPEED_M_PER_S;
+        let limit = (authority * kappa * STATION_MAX_SPEED_M_PER_S * STATION_MAX_SPEED_M_PER_S)
+            .max(f64::MIN_POSITIVE);
         libm::fabs(xi + rate * libm::fabs(rate) / (2.0 * limit)) <= reach
     }
 
@@ -320,13 +322,8 @@ mod tests {
         }
     }
 
-    /// The hold's entry test: with the default capsules' drag (a =
-    /// kappa * 118 1/m * (3 mm/s)^2, about 1.2e-4 m/s^2 at ideal sampling)
-    /// a relative speed stops within w^2 / (2 a): 0.3 mm/s at q = 0 stops
-    /// within 2 mm, 1 mm/s does not; the stopping point counts the side
-    /// the capsules move to (converging at 1 mm/s from 1.5 mm apart stops
-    /// 2.8 mm past zero; diverging at 0.4 mm/s from 1.5 mm, at 2.2 mm);
-    /// without differential drag the test never refuses.
+    /// The learned drag factors scale the dither's authority: 1 on the
+    /// model, the differential drag's share off it.
     #[test]
     fn drag_authority_is_the_differential_drag_against_the_model() {
         let drag = [134.7, 16.8];
@@ -342,6 +339,13 @@ mod tests {
         assert!(!s.can_stop(&state, 0.02, 0.0, 2.0e-3, 0.5));
     }
 
+    /// The hold's entry test: with the default capsules' drag (a =
+    /// kappa * 118 1/m * (3 mm/s)^2, about 1.2e-4 m/s^2 at ideal sampling)
+    /// a relative speed stops within w^2 / (2 a): 0.3 mm/s at q = 0 stops
+    /// within 2 mm, 1 mm/s does not; the stopping point counts the side
+    /// the capsules move to (converging at 1 mm/s from 1.5 mm apart stops
+    /// 2.8 mm past zero; diverging at 0.4 mm/s from 1.5 mm, at 2.2 mm);
+    /// without differential drag the test never refuses.
     #[test]
     fn can_stop_is_the_stopping_point_of_the_relative_motion() {
         let s = StationKeeper::<4>::new(&[134.7, 16.8]);
