@@ -57,6 +57,9 @@ pub struct StationKeeper<const NX: usize> {
     /// Drag direction `beta_i / sum beta^2` per capsule (the first NX / 2
     /// entries), m (zero: no differential drag, the dither is off).
     direction: [f64; NX],
+    /// `direction_i * b_i`: each capsule's share of the differential drag
+    /// (they sum to 1 when the drags differ), for `drag_authority`.
+    drag_share: [f64; NX],
     /// Index into [`STATION_PATTERN`] of the next actuation sample.
     phase: usize,
     /// Signed amplitude of the current pattern, m/s.
@@ -89,8 +92,13 @@ impl<const NX: usize> StationKeeper<NX> {
         for d in direction.iter_mut() {
             *d = if distinct { *d / norm2 } else { 0.0 };
         }
+        let mut drag_share = [0.0; NX];
+        for i in 0..m {
+            drag_share[i] = direction[i] * drag[i];
+        }
         StationKeeper {
             direction,
+            drag_share,
             phase: 0,
             amplitude_m_per_s: 0.0,
             velocity_m_per_s: 0.0,
@@ -133,16 +141,16 @@ impl<const NX: usize> StationKeeper<NX> {
         libm::fabs(xi + rate * libm::fabs(rate) / (2.0 * limit)) <= reach
     }
 
-    /// The dither's relative authority with drags `drag` (1/m, per
-    /// capsule) against the model's it was built from: 1 on the model,
-    /// less where the differential drag is smaller (capsules off the model
-    /// with their learned drag factors).
-    pub fn drag_authority(&self, drag: &[f64]) -> f64 {
-        self.direction
+    /// The dither's relative authority with each capsule's drag scaled by
+    /// `drag_factors[i]` (the learned factors; 1 = the drags it was built
+    /// from) against the model's: 1 on the model, less where the
+    /// differential drag is smaller.
+    pub fn drag_authority(&self, drag_factors: &[f64]) -> f64 {
+        self.drag_share
             .iter()
-            .zip(drag)
+            .zip(drag_factors)
             .take(NX / 2)
-            .map(|(d, b)| d * b)
+            .map(|(share, f)| share * f)
             .sum::<f64>()
             .max(0.0)
     }
@@ -328,10 +336,10 @@ mod tests {
     fn drag_authority_is_the_differential_drag_against_the_model() {
         let drag = [134.7, 16.8];
         let s = StationKeeper::<4>::new(&drag);
-        assert!((s.drag_authority(&drag) - 1.0).abs() < 1e-12);
-        assert!((s.drag_authority(&[0.8 * 134.7, 0.8 * 16.8]) - 0.8).abs() < 1e-12);
+        assert!((s.drag_authority(&[1.0, 1.0]) - 1.0).abs() < 1e-12);
+        assert!((s.drag_authority(&[0.8, 0.8]) - 0.8).abs() < 1e-12);
         // Only the large drag lower: the difference shrinks by 0.8 x 134.7 / 117.9.
-        let scaled = s.drag_authority(&[0.8 * 134.7, 16.8]);
+        let scaled = s.drag_authority(&[0.8, 1.0]);
         assert!((scaled - (0.8 * 134.7 - 16.8) / (134.7 - 16.8)).abs() < 1e-12);
         // A weaker authority stops the same relative speed farther out.
         let state = [0.0, 0.25e-3, 0.0, -0.25e-3];
