@@ -496,14 +496,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let outside = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > s.hold_release_position_m);
         // The dither's authority with the learned drag factors, never more
         // than the model's (a larger one would admit arrivals on a guess).
-        let mut drag_factors = [1.0; NX];
-        for (f, scale) in drag_factors.iter_mut().zip(self.est.applied_scales.iter()) {
-            *f = scale[1];
-        }
         let authority = self
             .law
             .station
-            .drag_authority(&drag_factors[..NX / 2])
+            .drag_authority(&self.est.applied_scales)
             .min(1.0);
         // Ideal sampling knows the state exactly and acts every sample:
         // there the centre law adds differential drag of its own (about

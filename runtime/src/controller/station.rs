@@ -142,15 +142,15 @@ impl<const NX: usize> StationKeeper<NX> {
     }
 
     /// The dither's relative authority with each capsule's drag scaled by
-    /// `drag_factors[i]` (the learned factors; 1 = the drags it was built
-    /// from) against the model's: 1 on the model, less where the
-    /// differential drag is smaller.
-    pub fn drag_authority(&self, drag_factors: &[f64]) -> f64 {
+    /// its factor `scales[i][1]` (the learned [gain, drag] factors; 1 = the
+    /// drags it was built from) against the model's: 1 on the model, less
+    /// where the differential drag is smaller.
+    pub fn drag_authority(&self, scales: &[[f64; 2]]) -> f64 {
         self.drag_share
             .iter()
-            .zip(drag_factors)
+            .zip(scales)
             .take(NX / 2)
-            .map(|(share, f)| share * f)
+            .map(|(share, f)| share * f[1])
             .sum::<f64>()
             .max(0.0)
     }
@@ -336,10 +336,10 @@ mod tests {
     fn drag_authority_is_the_differential_drag_against_the_model() {
         let drag = [134.7, 16.8];
         let s = StationKeeper::<4>::new(&drag);
-        assert!((s.drag_authority(&[1.0, 1.0]) - 1.0).abs() < 1e-12);
-        assert!((s.drag_authority(&[0.8, 0.8]) - 0.8).abs() < 1e-12);
+        assert!((s.drag_authority(&[[1.0, 1.0], [1.0, 1.0]]) - 1.0).abs() < 1e-12);
+        assert!((s.drag_authority(&[[1.0, 0.8], [1.0, 0.8]]) - 0.8).abs() < 1e-12);
         // Only the large drag lower: the difference shrinks by 0.8 x 134.7 / 117.9.
-        let scaled = s.drag_authority(&[0.8, 1.0]);
+        let scaled = s.drag_authority(&[[1.0, 0.8], [1.0, 1.0]]);
         assert!((scaled - (0.8 * 134.7 - 16.8) / (134.7 - 16.8)).abs() < 1e-12);
         // A weaker authority stops the same relative speed farther out.
         let state = [0.0, 0.25e-3, 0.0, -0.25e-3];
