@@ -11,6 +11,17 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if std::env::var_os("CAPSULE_TRACE").is_some() {
+        capsule_mpc_runtime::solver::shooting::TRACE
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+    if std::env::var_os("CAPSULE_NEAR1").is_some() {
+        capsule_mpc_runtime::controller::SHOT_NEAR.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+    if std::env::var_os("CAPSULE_SHOOT").is_some() {
+        capsule_mpc_runtime::solver::shooting::SHOOTING
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+    }
     match run(cli) {
         Ok(code) => code,
         // A closed pipe (`inspect | head`) is the reader's choice, not an error.

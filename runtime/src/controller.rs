@@ -336,7 +336,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// from the tables when creeping, and refine it from `e`.
     fn solve_step(&mut self, e: &[f64; NX]) -> SolveReport {
         self.solver.shift(self.law.applied_samples);
-        if self.creeping(e) {
+        if self.solver.shot_samples() == 0 && self.creeping(e) {
             // Nearly at rest and still away from the target: the stored
             // minimum-time plan from here is the best start; a refined plan
             // that creeps on the quadratic cost can take seconds.
@@ -398,7 +398,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             // The solver keeps |u| <= u_max; clamp again as a last invariant.
             *o = u.clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M);
         }
-        let n = if n_max <= 1 {
+        let near = (0..NX / 2).all(|i| libm::fabs(e[2 * i]) <= SHOT_NEAR_M);
+        let n = if n_max <= 1 || (self.solver.shot_samples() > 0 && near && shot_near_on()) {
             1
         } else {
             self.actuation_length(e, n_max.min(S::N))
@@ -692,4 +693,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
         }
     }
+}
+
+/// Prototype: near the target a shot is played one sample per phase.
+const SHOT_NEAR_M: f64 = 5e-3;
+pub static SHOT_NEAR: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+fn shot_near_on() -> bool {
+    SHOT_NEAR.load(core::sync::atomic::Ordering::Relaxed)
 }

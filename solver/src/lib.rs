@@ -28,6 +28,7 @@
 #![forbid(unsafe_code)]
 // Comparisons that must reject NaN are written `!(a > b)` on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
+extern crate std; // PROTO TRACE
 
 pub mod drag;
 pub mod explicit;
@@ -38,6 +39,7 @@ pub mod qp;
 pub mod refine;
 pub mod report;
 pub mod rollout;
+pub mod shooting;
 pub mod spec;
 pub mod tables;
 #[cfg(feature = "write")]

@@ -75,6 +75,9 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     fn adopt_explicit(&mut self);
     /// Current plan, T/m per sample.
     fn plan(&self) -> &[f64; K];
+    /// When the plan is a converged minimum-time shot: the samples left
+    /// until it ends at the target at rest (0: not a shot).
+    fn shot_samples(&self) -> usize;
     /// Whether a start at rest at relative positions `e` is covered.
     fn covers_from_rest(e: &[f64; NX]) -> bool;
     /// The first leg from rest at displacement `d = x_start - x_target`
@@ -167,6 +170,9 @@ impl<
     }
     fn solve_explicit(&mut self, e: &[f64; NX]) -> SolveReport {
         Solver::solve_explicit(self, e)
+    }
+    fn shot_samples(&self) -> usize {
+        Solver::shot_samples(self)
     }
     fn adopt_explicit(&mut self) {
         Solver::adopt_explicit(self)

@@ -18,8 +18,10 @@ use crate::rollout::{
     nominal_scales, rollout_cost_below_scaled, rollout_with_jacobians_scaled, substep_s,
     ModelScales, Schedule, StepJacobian,
 };
+use crate::shooting::{resample, Shooter, SHOOTING, SHOT_ITERATIONS, SHOT_MAX_LENGTHS};
 use crate::spec::Spec;
 use core::marker::PhantomData;
+use core::sync::atomic::Ordering;
 
 /// All memory the solver uses: created once, reused every step. `S` the
 /// module's constants, `M` capsules, `NX = 2 M` states, window `N`, plan
@@ -62,6 +64,11 @@ pub struct Solver<S, const M: usize, const NX: usize, const N: usize, const K: u
     /// The model the refinement rolls plans out on: factors on each
     /// capsule's gain and drag (1: the model; see `set_model_scales`).
     scales: ModelScales<M>,
+    /// Scratch of the minimum-time shooting (see `shooting`).
+    shooter: Shooter<M, NX, K>,
+    /// Length of the current plan when it is a converged shot (it ends at
+    /// the target at rest after `shot_samples` samples); 0: not a shot.
+    shot_samples: usize,
     spec: PhantomData<S>,
 }
 
@@ -119,6 +126,8 @@ impl<
             tier: Tier::Refined,
             engine,
             scales: nominal_scales(),
+            shooter: Shooter::new(),
+            shot_samples: 0,
             spec: PhantomData,
         }
     }
@@ -160,6 +169,7 @@ impl<
     pub fn reset(&mut self) {
         self.plan = [0.0; K];
         self.has_plan = false;
+        self.shot_samples = 0;
         self.explicit_ready = false;
         self.explicit_slot = usize::MAX;
         self.explicit_active = [0; N];
@@ -223,6 +233,7 @@ impl<
         if self.explicit_ready {
             self.plan = self.explicit_plan;
             self.has_plan = true;
+            self.shot_samples = 0;
             self.explicit_ready = false;
             self.tier = Tier::Explicit;
         }
@@ -231,6 +242,11 @@ impl<
     /// The explicit tier's plan of the last `solve_explicit`.
     pub fn explicit_plan(&self) -> &[f64; K] {
         &self.explicit_plan
+    }
+
+    /// Samples left of the current shot (0: the plan is not a shot).
+    pub fn shot_samples(&self) -> usize {
+        self.shot_samples
     }
 
     /// The current plan (gradient per sample, T/m), `plan()[0]` first.
@@ -242,6 +258,7 @@ impl<
     /// with zero gradient.
     pub fn shift(&mut self, samples: usize) {
         let s = if samples > K { K } else { samples };
+        self.shot_samples = self.shot_samples.saturating_sub(s);
         let mut i = 0;
         while i < K {
             self.plan[i] = if i + s < K { self.plan[i + s] } else { 0.0 };
@@ -273,6 +290,154 @@ impl<
 
     /// Refines the plan from relative state `e = x - x_target`.
     pub fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
+        let shooting = SHOOTING.load(Ordering::Relaxed);
+        if shooting && self.has_plan && self.shot_samples > 0 {
+            if let Some(report) = self.reshoot(e) {
+                return report;
+            }
+        }
+        let mut report = self.solve_refined(e);
+        if shooting && report.status != SolveStatus::OutOfRange {
+            self.acquire_shot(e, &mut report);
+        }
+        report
+    }
+
+    /// The current shot re-solved from `e` at its remaining length (then
+    /// one sample shorter, or up to two longer): None when none converges.
+    fn reshoot(&mut self, e: &[f64; NX]) -> Option<SolveReport> {
+        let n = self.shot_samples;
+        let mut found = 0;
+        let mut p = self.plan;
+        if self.shooter.shoot::<S>(e, &mut p, n, SHOT_ITERATIONS, &self.schedule, &self.scales) {
+            found = n;
+            self.candidate = p;
+            if n > 1
+                && self.shooter.shoot::<S>(
+                    e,
+                    &mut self.candidate,
+                    n - 1,
+                    SHOT_ITERATIONS,
+                    &self.schedule,
+                    &self.scales,
+                )
+            {
+                p = self.candidate;
+                found = n - 1;
+            }
+        } else {
+            let mut extra = 1;
+            while extra <= 2 && n + extra <= K {
+                self.candidate = self.plan;
+                if self.shooter.shoot::<S>(
+                    e,
+                    &mut self.candidate,
+                    n + extra,
+                    SHOT_ITERATIONS,
+                    &self.schedule,
+                    &self.scales,
+                ) {
+                    p = self.candidate;
+                    found = n + extra;
+                    break;
+                }
+                extra += 1;
+            }
+        }
+        if crate::shooting::TRACE.load(Ordering::Relaxed) {
+            std::eprintln!("reshoot n={} found={} e={:?}", n, found, e);
+        }
+        if found == 0 {
+            self.shot_samples = 0;
+            return None;
+        }
+        self.plan = p;
+        self.shot_samples = found;
+        self.explicit_ready = false;
+        self.tier = Tier::Refined;
+        Some(SolveReport {
+            status: SolveStatus::Refined,
+            cost: rollout_cost_below_scaled::<S, M, NX, K>(
+                e,
+                &self.plan,
+                &self.schedule,
+                &self.scales,
+                f64::INFINITY,
+            ),
+            took_table_plan: false,
+            qp_iterations: 0,
+            max_qp_iterations: 0,
+            tier: Tier::Refined,
+        })
+    }
+
+    /// After a refinement: where the refined plan settles (in the band from
+    /// some sample to its end), look for a shot that arrives earlier,
+    /// walking the length down one sample at a time.
+    fn acquire_shot(&mut self, e: &[f64; NX], report: &mut SolveReport) {
+        let settle = self
+            .shooter
+            .settle_sample::<S>(e, &self.plan, &self.schedule, &self.scales);
+        if settle == 0 || settle > K {
+            return;
+        }
+        // Lock the arrival at `settle`, then bisect for the shortest length
+        // that converges from the plan compressed in time.
+        self.candidate = self.plan;
+        if !self.shooter.shoot::<S>(
+            e,
+            &mut self.candidate,
+            settle,
+            SHOT_ITERATIONS,
+            &self.schedule,
+            &self.scales,
+        ) {
+            if crate::shooting::TRACE.load(Ordering::Relaxed) {
+                std::eprintln!("acquire settle={} lock failed e={:?}", settle, e);
+            }
+            return;
+        }
+        let mut p = self.candidate;
+        let mut best = settle;
+        let mut lo = 0;
+        let mut tried = 0;
+        while best - lo > 1 && tried < SHOT_MAX_LENGTHS {
+            let n = (lo + best) / 2;
+            resample(&p, best, &mut self.candidate, n);
+            if self.shooter.shoot::<S>(
+                e,
+                &mut self.candidate,
+                n,
+                SHOT_ITERATIONS,
+                &self.schedule,
+                &self.scales,
+            ) {
+                p = self.candidate;
+                best = n;
+            } else {
+                lo = n;
+            }
+            tried += 1;
+        }
+        if crate::shooting::TRACE.load(Ordering::Relaxed) {
+            std::eprintln!("acquire settle={} best={} e={:?}", settle, best, e);
+        }
+        if best > 0 {
+            self.plan = p;
+            self.shot_samples = best;
+            report.cost = rollout_cost_below_scaled::<S, M, NX, K>(
+                e,
+                &self.plan,
+                &self.schedule,
+                &self.scales,
+                f64::INFINITY,
+            );
+        }
+    }
+
+    /// The refinement proper (see the module docs).
+    fn solve_refined(&mut self, e: &[f64; NX]) -> SolveReport {
+        self.shot_samples = 0;
         let mut report = SolveReport {
             status: SolveStatus::Refined,
             cost: 0.0,

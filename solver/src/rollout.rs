@@ -178,7 +178,7 @@ fn mat2_mul(p: &[f64; 4], q: &[f64; 4]) -> [f64; 4] {
 /// them side by side, sub-step by sub-step, lets the CPU overlap them. Per
 /// capsule the arithmetic is unchanged, bit for bit.
 #[inline(always)]
-fn sample_all<S: Spec<M, NX>, const M: usize, const NX: usize, const JAC: bool>(
+pub(crate) fn sample_all<S: Spec<M, NX>, const M: usize, const NX: usize, const JAC: bool>(
     e: &mut [f64; NX],
     u: f64,
     k: usize,

@@ -23,7 +23,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         if self.sup.on_last_leg && self.update_hold(&e) {
             return Mode::Hold;
         }
-        if self.sup.on_last_leg && self.settings.refine != Refine::None && self.stalled(&e, since_s)
+        if self.sup.on_last_leg
+            && self.settings.refine != Refine::None
+            && self.solver.shot_samples() <= self.law.applied_samples
+            && self.stalled(&e, since_s)
         {
             return Mode::Brake;
         }
