@@ -336,6 +336,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// from the tables when creeping, and refine it from `e`.
     fn solve_step(&mut self, e: &[f64; NX]) -> SolveReport {
         self.solver.shift(self.law.applied_samples);
+        let far = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > shot_far_m());
+        self.solver
+            .set_shooting(self.settings.sampling == Sampling::Ideal || far);
         if self.solver.shot_samples() == 0 && self.creeping(e) {
             // Nearly at rest and still away from the target: the stored
             // minimum-time plan from here is the best start; a refined plan
@@ -518,8 +521,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             slow(s.hold_release_speed_m_per_s)
                 && spread_m <= s.hold_release_position_m
                 && !(NX / 2 <= HOLD_EARLY_EXIT_MAX_CAPSULES
-                    && outside
-                    && spread_m > HOLD_SPREAD_EXIT_M
+                    && (if shot_near_hold() {
+                        spread_m > hold_exit_m()
+                            || (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > hold_out_m())
+                    } else {
+                        outside && spread_m > HOLD_SPREAD_EXIT_M
+                    })
                     && !settling)
                 && centre_m <= HOLD_CENTRE_RELEASE_M
                 // The frames after entry tell the relative speed better
@@ -527,7 +534,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && (!settling || can_stop(HOLD_CONFIRM_SPREAD_M))
         } else {
             slow(s.hold_enter_speed_m_per_s)
-                && half_spread_m(e, 0.0) <= s.hold_release_position_m
+                && half_spread_m(e, 0.0)
+                    <= if shot_near_hold() {
+                        hold_enter_m()
+                    } else {
+                        s.hold_release_position_m
+                    }
                 && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
                 && centre_m <= HOLD_CENTRE_ENTER_M
                 && can_stop(HOLD_STOP_SPREAD_M)
@@ -700,4 +712,24 @@ const SHOT_NEAR_M: f64 = 5e-3;
 pub static SHOT_NEAR: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 fn shot_near_on() -> bool {
     SHOT_NEAR.load(core::sync::atomic::Ordering::Relaxed)
+}
+pub static SHOT_HOLD: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+fn shot_near_hold() -> bool {
+    SHOT_HOLD.load(core::sync::atomic::Ordering::Relaxed)
+}
+pub static HOLD_ENTER_BITS: core::sync::atomic::AtomicU64 = core::sync::atomic::AtomicU64::new(0);
+pub static HOLD_EXIT_BITS: core::sync::atomic::AtomicU64 = core::sync::atomic::AtomicU64::new(0);
+fn hold_enter_m() -> f64 {
+    f64::from_bits(HOLD_ENTER_BITS.load(core::sync::atomic::Ordering::Relaxed))
+}
+fn hold_exit_m() -> f64 {
+    f64::from_bits(HOLD_EXIT_BITS.load(core::sync::atomic::Ordering::Relaxed))
+}
+pub static HOLD_OUT_BITS: core::sync::atomic::AtomicU64 = core::sync::atomic::AtomicU64::new(0);
+fn hold_out_m() -> f64 {
+    f64::from_bits(HOLD_OUT_BITS.load(core::sync::atomic::Ordering::Relaxed))
+}
+pub static SHOT_FAR_BITS: core::sync::atomic::AtomicU64 = core::sync::atomic::AtomicU64::new(0);
+fn shot_far_m() -> f64 {
+    f64::from_bits(SHOT_FAR_BITS.load(core::sync::atomic::Ordering::Relaxed))
 }

@@ -78,6 +78,8 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// When the plan is a converged minimum-time shot: the samples left
     /// until it ends at the target at rest (0: not a shot).
     fn shot_samples(&self) -> usize;
+    /// Whether `solve` looks for minimum-time shots (see `shooting`).
+    fn set_shooting(&mut self, on: bool);
     /// Whether a start at rest at relative positions `e` is covered.
     fn covers_from_rest(e: &[f64; NX]) -> bool;
     /// The first leg from rest at displacement `d = x_start - x_target`
@@ -173,6 +175,9 @@ impl<
     }
     fn shot_samples(&self) -> usize {
         Solver::shot_samples(self)
+    }
+    fn set_shooting(&mut self, on: bool) {
+        Solver::set_shooting(self, on)
     }
     fn adopt_explicit(&mut self) {
         Solver::adopt_explicit(self)

@@ -69,6 +69,8 @@ pub struct Solver<S, const M: usize, const NX: usize, const N: usize, const K: u
     /// Length of the current plan when it is a converged shot (it ends at
     /// the target at rest after `shot_samples` samples); 0: not a shot.
     shot_samples: usize,
+    /// Whether `solve` shoots.
+    shooting: bool,
     spec: PhantomData<S>,
 }
 
@@ -128,6 +130,7 @@ impl<
             scales: nominal_scales(),
             shooter: Shooter::new(),
             shot_samples: 0,
+            shooting: true,
             spec: PhantomData,
         }
     }
@@ -244,6 +247,14 @@ impl<
         &self.explicit_plan
     }
 
+    /// Whether `solve` looks for minimum-time shots; off drops the shot.
+    pub fn set_shooting(&mut self, on: bool) {
+        self.shooting = on;
+        if !on {
+            self.shot_samples = 0;
+        }
+    }
+
     /// Samples left of the current shot (0: the plan is not a shot).
     pub fn shot_samples(&self) -> usize {
         self.shot_samples
@@ -290,7 +301,7 @@ impl<
 
     /// Refines the plan from relative state `e = x - x_target`.
     pub fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
-        let shooting = SHOOTING.load(Ordering::Relaxed);
+        let shooting = self.shooting && SHOOTING.load(Ordering::Relaxed);
         if shooting && self.has_plan && self.shot_samples > 0 {
             if let Some(report) = self.reshoot(e) {
                 return report;
