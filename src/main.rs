@@ -11,29 +11,6 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    if std::env::var_os("CAPSULE_TRACE").is_some() {
-        capsule_mpc_runtime::solver::shooting::TRACE
-            .store(true, std::sync::atomic::Ordering::Relaxed);
-    }
-    if std::env::var_os("CAPSULE_NEAR1").is_some() {
-        capsule_mpc_runtime::controller::SHOT_NEAR.store(true, std::sync::atomic::Ordering::Relaxed);
-    }
-    let env_f = |k: &str, d: f64| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
-    capsule_mpc_runtime::controller::HOLD_ENTER_BITS
-        .store(env_f("CAPSULE_HOLD_ENTER", 0.7e-3).to_bits(), std::sync::atomic::Ordering::Relaxed);
-    capsule_mpc_runtime::controller::HOLD_EXIT_BITS
-        .store(env_f("CAPSULE_HOLD_EXIT", 0.8e-3).to_bits(), std::sync::atomic::Ordering::Relaxed);
-    capsule_mpc_runtime::controller::HOLD_OUT_BITS
-        .store(env_f("CAPSULE_HOLD_OUT", 1.0).to_bits(), std::sync::atomic::Ordering::Relaxed);
-    capsule_mpc_runtime::controller::SHOT_FAR_BITS
-        .store(env_f("CAPSULE_FAR", 0.0).to_bits(), std::sync::atomic::Ordering::Relaxed);
-    if std::env::var_os("CAPSULE_HOLD").is_some() {
-        capsule_mpc_runtime::controller::SHOT_HOLD.store(true, std::sync::atomic::Ordering::Relaxed);
-    }
-    if std::env::var_os("CAPSULE_SHOOT").is_some() {
-        capsule_mpc_runtime::solver::shooting::SHOOTING
-            .store(true, std::sync::atomic::Ordering::Relaxed);
-    }
     match run(cli) {
         Ok(code) => code,
         // A closed pipe (`inspect | head`) is the reader's choice, not an error.

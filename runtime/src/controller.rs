@@ -68,6 +68,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             glitch_frames: GLITCH_FRAMES,
             model_gain_uncertainty: MODEL_GAIN_UNCERTAINTY,
             model_drag_uncertainty: MODEL_DRAG_UNCERTAINTY,
+            shooting: true,
         }
     }
 
@@ -333,12 +334,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     /// `Plan`, first half: shift the plan by what was played, restart it
-    /// from the tables when creeping, and refine it from `e`.
+    /// from the tables when creeping (not while a shot flies), and refine
+    /// or re-shoot it from `e`.
     fn solve_step(&mut self, e: &[f64; NX]) -> SolveReport {
         self.solver.shift(self.law.applied_samples);
-        let far = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > shot_far_m());
-        self.solver
-            .set_shooting(self.settings.sampling == Sampling::Ideal || far);
+        self.solver.set_shooting(self.shooting_wanted(e));
         if self.solver.shot_samples() == 0 && self.creeping(e) {
             // Nearly at rest and still away from the target: the stored
             // minimum-time plan from here is the best start; a refined plan
@@ -346,6 +346,19 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.solver.reset();
         }
         self.refine_plan(e)
+    }
+
+    /// Whether the solver should look for minimum-time shots from `e` (see
+    /// `capsule_mpc_solver::shooting`). Under ideal sampling everywhere.
+    /// Under the scanner cycle only while some capsule is farther than
+    /// `SHOT_SCANNER_BEYOND_M` from its target: nearer, a shot's
+    /// separation manoeuvre (up to 0.1 m/s for a millimetre of relative
+    /// error) played through tracking gaps on an estimate arrives with a
+    /// relative speed the hold cannot remove (measured, docs/decisions.md).
+    fn shooting_wanted(&self, e: &[f64; NX]) -> bool {
+        self.settings.shooting
+            && (self.settings.sampling == Sampling::Ideal
+                || (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > SHOT_SCANNER_BEYOND_M))
     }
 
     /// `Fallback`: no plan. The next cycle looks the (braked) state up
@@ -401,8 +414,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             // The solver keeps |u| <= u_max; clamp again as a last invariant.
             *o = u.clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M);
         }
-        let near = (0..NX / 2).all(|i| libm::fabs(e[2 * i]) <= SHOT_NEAR_M);
-        let n = if n_max <= 1 || (self.solver.shot_samples() > 0 && near && shot_near_on()) {
+        let n = if n_max <= 1 {
             1
         } else {
             self.actuation_length(e, n_max.min(S::N))
@@ -465,7 +477,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // iteration map it is checked against measured those.
         let mut report = self.solver.solve(e);
         for _ in 1..rounds {
-            if report.status == SolveStatus::OutOfRange {
+            // A converged shot is already the answer from this state.
+            if report.status == SolveStatus::OutOfRange || self.solver.shot_samples() > 0 {
                 break;
             }
             let r = self.solver.solve(e);
@@ -521,12 +534,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             slow(s.hold_release_speed_m_per_s)
                 && spread_m <= s.hold_release_position_m
                 && !(NX / 2 <= HOLD_EARLY_EXIT_MAX_CAPSULES
-                    && (if shot_near_hold() {
-                        spread_m > hold_exit_m()
-                            || (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > hold_out_m())
-                    } else {
-                        outside && spread_m > HOLD_SPREAD_EXIT_M
-                    })
+                    && outside
+                    && spread_m > HOLD_SPREAD_EXIT_M
                     && !settling)
                 && centre_m <= HOLD_CENTRE_RELEASE_M
                 // The frames after entry tell the relative speed better
@@ -534,12 +543,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && (!settling || can_stop(HOLD_CONFIRM_SPREAD_M))
         } else {
             slow(s.hold_enter_speed_m_per_s)
-                && half_spread_m(e, 0.0)
-                    <= if shot_near_hold() {
-                        hold_enter_m()
-                    } else {
-                        s.hold_release_position_m
-                    }
+                && half_spread_m(e, 0.0) <= s.hold_release_position_m
                 && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
                 && centre_m <= HOLD_CENTRE_ENTER_M
                 && can_stop(HOLD_STOP_SPREAD_M)
@@ -705,31 +709,4 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
         }
     }
-}
-
-/// Prototype: near the target a shot is played one sample per phase.
-const SHOT_NEAR_M: f64 = 5e-3;
-pub static SHOT_NEAR: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
-fn shot_near_on() -> bool {
-    SHOT_NEAR.load(core::sync::atomic::Ordering::Relaxed)
-}
-pub static SHOT_HOLD: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
-fn shot_near_hold() -> bool {
-    SHOT_HOLD.load(core::sync::atomic::Ordering::Relaxed)
-}
-pub static HOLD_ENTER_BITS: core::sync::atomic::AtomicU64 = core::sync::atomic::AtomicU64::new(0);
-pub static HOLD_EXIT_BITS: core::sync::atomic::AtomicU64 = core::sync::atomic::AtomicU64::new(0);
-fn hold_enter_m() -> f64 {
-    f64::from_bits(HOLD_ENTER_BITS.load(core::sync::atomic::Ordering::Relaxed))
-}
-fn hold_exit_m() -> f64 {
-    f64::from_bits(HOLD_EXIT_BITS.load(core::sync::atomic::Ordering::Relaxed))
-}
-pub static HOLD_OUT_BITS: core::sync::atomic::AtomicU64 = core::sync::atomic::AtomicU64::new(0);
-fn hold_out_m() -> f64 {
-    f64::from_bits(HOLD_OUT_BITS.load(core::sync::atomic::Ordering::Relaxed))
-}
-pub static SHOT_FAR_BITS: core::sync::atomic::AtomicU64 = core::sync::atomic::AtomicU64::new(0);
-fn shot_far_m() -> f64 {
-    f64::from_bits(SHOT_FAR_BITS.load(core::sync::atomic::Ordering::Relaxed))
 }

@@ -28,7 +28,6 @@
 #![forbid(unsafe_code)]
 // Comparisons that must reject NaN are written `!(a > b)` on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
-extern crate std; // PROTO TRACE
 
 pub mod drag;
 pub mod explicit;

@@ -18,10 +18,9 @@ use crate::rollout::{
     nominal_scales, rollout_cost_below_scaled, rollout_with_jacobians_scaled, substep_s,
     ModelScales, Schedule, StepJacobian,
 };
-use crate::shooting::{resample, Shooter, SHOOTING, SHOT_ITERATIONS, SHOT_MAX_LENGTHS};
+use crate::shooting::{resample, Shooter, SHOT_ITERATIONS, SHOT_MAX_LENGTHS};
 use crate::spec::Spec;
 use core::marker::PhantomData;
-use core::sync::atomic::Ordering;
 
 /// All memory the solver uses: created once, reused every step. `S` the
 /// module's constants, `M` capsules, `NX = 2 M` states, window `N`, plan
@@ -130,7 +129,7 @@ impl<
             scales: nominal_scales(),
             shooter: Shooter::new(),
             shot_samples: 0,
-            shooting: true,
+            shooting: false,
             spec: PhantomData,
         }
     }
@@ -301,7 +300,8 @@ impl<
 
     /// Refines the plan from relative state `e = x - x_target`.
     pub fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
-        let shooting = self.shooting && SHOOTING.load(Ordering::Relaxed);
+        let shooting = self.shooting;
+        self.shooter.start_budget();
         if shooting && self.has_plan && self.shot_samples > 0 {
             if let Some(report) = self.reshoot(e) {
                 return report;
@@ -320,7 +320,10 @@ impl<
         let n = self.shot_samples;
         let mut found = 0;
         let mut p = self.plan;
-        if self.shooter.shoot::<S>(e, &mut p, n, SHOT_ITERATIONS, &self.schedule, &self.scales) {
+        if self
+            .shooter
+            .shoot::<S>(e, &mut p, n, SHOT_ITERATIONS, &self.schedule, &self.scales)
+        {
             found = n;
             self.candidate = p;
             if n > 1
@@ -354,9 +357,6 @@ impl<
                 }
                 extra += 1;
             }
-        }
-        if crate::shooting::TRACE.load(Ordering::Relaxed) {
-            std::eprintln!("reshoot n={} found={} e={:?}", n, found, e);
         }
         if found == 0 {
             self.shot_samples = 0;
@@ -403,9 +403,6 @@ impl<
             &self.schedule,
             &self.scales,
         ) {
-            if crate::shooting::TRACE.load(Ordering::Relaxed) {
-                std::eprintln!("acquire settle={} lock failed e={:?}", settle, e);
-            }
             return;
         }
         let mut p = self.candidate;
@@ -429,9 +426,6 @@ impl<
                 lo = n;
             }
             tried += 1;
-        }
-        if crate::shooting::TRACE.load(Ordering::Relaxed) {
-            std::eprintln!("acquire settle={} best={} e={:?}", settle, best, e);
         }
         if best > 0 {
             self.plan = p;

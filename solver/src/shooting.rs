@@ -15,7 +15,6 @@
 use crate::qp::clamp_u;
 use crate::rollout::{sample_all, ModelScales, Schedule, StepJacobian};
 use crate::spec::Spec;
-use core::sync::atomic::AtomicBool;
 
 /// Terminal tolerances of a converged shot: every capsule within this of
 /// its target (m) and below this speed (m/s). A tenth of the settle band's
@@ -23,17 +22,17 @@ use core::sync::atomic::AtomicBool;
 pub const SHOT_POSITION_TOLERANCE_M: f64 = 1e-4;
 pub const SHOT_SPEED_TOLERANCE_M_PER_S: f64 = 5e-4;
 
-/// Prototype switch: whether `Solver::solve` shoots (off: the refinement
-/// alone, bit for bit as before).
-pub static SHOOTING: AtomicBool = AtomicBool::new(false);
-pub static TRACE: AtomicBool = AtomicBool::new(false);
-
 /// The settle band: within this of the target (m) and below this speed.
 pub const BAND_POSITION_M: f64 = 1e-3;
 pub const BAND_SPEED_M_PER_S: f64 = 5e-3;
 
 /// Plan lengths tried when a shot is first looked for.
 pub const SHOT_MAX_LENGTHS: usize = 8;
+
+/// Plan samples the shooting may roll out per solve (every Gauss-Newton
+/// iteration and line-search trial rolls `n` samples): the bound on its
+/// compute time. 2 400 samples are 30 rollouts of the whole plan.
+pub const SHOT_SAMPLE_BUDGET: usize = 2400;
 
 /// Gauss-Newton iterations per plan length tried.
 pub const SHOT_ITERATIONS: usize = 6;
@@ -57,6 +56,8 @@ pub struct Shooter<const M: usize, const NX: usize, const K: usize> {
     trial: [f64; K],
     step: [f64; K],
     fixed: [bool; K],
+    /// Samples left of this solve's `SHOT_SAMPLE_BUDGET`.
+    budget_samples: usize,
 }
 
 impl<const M: usize, const NX: usize, const K: usize> Default for Shooter<M, NX, K> {
@@ -166,7 +167,23 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
             trial: [0.0; K],
             step: [0.0; K],
             fixed: [false; K],
+            budget_samples: SHOT_SAMPLE_BUDGET,
         }
+    }
+
+    /// Restores the sample budget (once per solve).
+    pub fn start_budget(&mut self) {
+        self.budget_samples = SHOT_SAMPLE_BUDGET;
+    }
+
+    /// Whether `n` more samples fit the budget; takes them if so.
+    fn spend(&mut self, n: usize) -> bool {
+        if n > self.budget_samples {
+            self.budget_samples = 0;
+            return false;
+        }
+        self.budget_samples -= n;
+        true
     }
 
     /// End state of `plan[..n]` from `e0` (samples from `n` on are zero and
@@ -184,7 +201,14 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
         let mut k = 0;
         while k < n {
             if JAC {
-                sample_all::<S, M, NX, true>(&mut e, plan[k], k, schedule, scales, &mut self.jac[k]);
+                sample_all::<S, M, NX, true>(
+                    &mut e,
+                    plan[k],
+                    k,
+                    schedule,
+                    scales,
+                    &mut self.jac[k],
+                );
             } else {
                 sample_all::<S, M, NX, false>(&mut e, plan[k], k, schedule, scales, &mut scratch);
             }
@@ -334,6 +358,9 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
             plan[k] = 0.0;
             k += 1;
         }
+        if !self.spend(n) {
+            return false;
+        }
         let end = self.roll::<S, true>(e0, plan, n, schedule, scales);
         let (mut r, mut norm) = residual(&end);
         let mut it = 0;
@@ -347,6 +374,9 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
             let mut tries = 0;
             let mut accepted = false;
             while tries < SHOT_LINE_SEARCH_TRIES {
+                if !self.spend(n) {
+                    return false;
+                }
                 self.trial = *plan;
                 let mut k = 0;
                 while k < n {
@@ -374,29 +404,6 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
             it += 1;
         }
         converged(&r)
-    }
-
-    /// Weighted terminal miss of `plan[..n]` from `e0` (1 at the tolerance).
-    pub fn miss<S: Spec<M, NX>>(
-        &mut self,
-        e0: &[f64; NX],
-        plan: &[f64; K],
-        n: usize,
-        schedule: &Schedule,
-        scales: &ModelScales<M>,
-    ) -> f64 {
-        let end = self.roll::<S, false>(e0, plan, n, schedule, scales);
-        let (r, _) = residual(&end);
-        let mut worst = 0.0;
-        let mut i = 0;
-        while i < NX {
-            let a = libm::fabs(r[i]);
-            if !(a <= worst) {
-                worst = a;
-            }
-            i += 1;
-        }
-        worst
     }
 
     /// The sample from which `plan`'s rollout from `e0` stays in the settle

@@ -102,6 +102,12 @@ pub struct ControllerSettings {
     /// the model exactly). Real capsules are known to 10-20 %.
     pub model_gain_uncertainty: f64,
     pub model_drag_uncertainty: f64,
+    /// Minimum-time shots (`capsule_mpc_solver::shooting`): the plan is
+    /// the shortest one that ends at the target at rest, re-solved every
+    /// cycle, wherever one converges (scanner cycle: beyond
+    /// `SHOT_SCANNER_BEYOND_M`); off, the refinement of the stored plans
+    /// alone.
+    pub shooting: bool,
 }
 impl ControllerSettings {
     /// Tracking phase + extra delay: the zero-gradient wait between a
@@ -130,6 +136,10 @@ impl ControllerSettings {
         }
     }
 }
+
+/// Under the scanner cycle, shots are looked for only while some capsule is
+/// farther than this from its target, m (see `Controller::shooting_wanted`).
+pub const SHOT_SCANNER_BEYOND_M: f64 = 3e-3;
 
 /// Default hold entry: 0.7 of the 1 mm settle tolerance, m.
 pub const HOLD_ENTER_POSITION_M: f64 = 0.7e-3;
