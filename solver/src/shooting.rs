@@ -69,7 +69,7 @@ impl<const M: usize, const NX: usize, const K: usize> Default for Shooter<M, NX,
 /// Weight of terminal coordinate `r`: 1 at the tolerance.
 #[inline(always)]
 fn weight(r: usize) -> f64 {
-    if r % 2 == 0 {
+    if r.is_multiple_of(2) {
         1.0 / SHOT_POSITION_TOLERANCE_M
     } else {
         1.0 / SHOT_SPEED_TOLERANCE_M_PER_S
@@ -439,7 +439,7 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
 fn in_band<const NX: usize>(e: &[f64; NX]) -> bool {
     let mut i = 0;
     while i < NX {
-        let bound = if i % 2 == 0 {
+        let bound = if i.is_multiple_of(2) {
             BAND_POSITION_M
         } else {
             BAND_SPEED_M_PER_S
