@@ -287,6 +287,11 @@ pub struct SimulateArgs {
     /// No terminal hold near the target: the MPC re-plans to the end.
     #[arg(long)]
     pub no_hold: bool,
+    /// Minimum-time shots (experimental law, off by default): the plan is
+    /// the shortest one that ends at the target at rest, re-solved every
+    /// cycle (scanner cycle: while a capsule is beyond 3 mm of its target).
+    #[arg(long)]
+    pub shooting: bool,
     /// When the SQP refinement runs after the explicit tier (default: the
     /// config's `controller.refine`, itself `per-sample` by default).
     #[arg(long, value_enum)]

@@ -68,7 +68,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             glitch_frames: GLITCH_FRAMES,
             model_gain_uncertainty: MODEL_GAIN_UNCERTAINTY,
             model_drag_uncertainty: MODEL_DRAG_UNCERTAINTY,
-            shooting: true,
+            shooting: false,
         }
     }
 

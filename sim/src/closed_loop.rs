@@ -119,6 +119,8 @@ pub struct RunOptions {
     /// Terminal hold near the target (off: the MPC re-plans to the end,
     /// as the paper's controller does).
     pub hold: bool,
+    /// Minimum-time shots (`ControllerSettings::shooting`; off by default).
+    pub shooting: bool,
     /// When the SQP refinement runs after the explicit tier (the config's
     /// `controller.refine` by default).
     pub refine: RefineMode,
@@ -144,6 +146,7 @@ impl RunOptions {
             lose_every: None,
             preset: Preset::Default,
             hold: true,
+            shooting: false,
             refine: config.controller.refine,
             mismatch: PlantMismatch::default(),
         }
@@ -304,6 +307,7 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     settings.extra_delay_s = opts.extra_delay_s;
     settings.position_noise_m = opts.position_noise_m;
     settings.disturbance_bound = opts.disturbance.bound_si();
+    settings.shooting = opts.shooting;
     if !opts.hold || opts.preset == Preset::Paper {
         // Zero-size entry set: the hold is never entered.
         settings.hold_enter_position_m = 0.0;

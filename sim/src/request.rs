@@ -30,6 +30,8 @@ pub struct SimulateRequest {
     pub compensate_delay: bool,
     pub lose_every: Option<usize>,
     pub hold: bool,
+    /// Minimum-time shots (off by default).
+    pub shooting: bool,
     /// None: the config's `controller.refine`.
     pub refine: Option<RefineMode>,
     /// None: the config's extra delay (refused with ideal sampling).
@@ -55,6 +57,7 @@ impl SimulateRequest {
             compensate_delay: true,
             lose_every: None,
             hold: true,
+            shooting: false,
             refine: None,
             extra_delay_s: None,
             mismatch: PlantMismatch::default(),
@@ -99,6 +102,7 @@ impl SimulateRequest {
         opts.compensate_delay = self.compensate_delay;
         opts.lose_every = self.lose_every;
         opts.hold = self.hold;
+        opts.shooting = self.shooting;
         opts.mismatch = self.mismatch.clone();
         if let Some(r) = self.refine {
             opts.refine = r;
