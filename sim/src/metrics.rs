@@ -5,10 +5,11 @@ use crate::plant::{Phase, Record};
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
-/// Settling band on each position error, m.
-pub const SETTLE_POSITION_TOL_M: f64 = 1e-3;
+/// Settling band on each position error, m (the one the solver's
+/// minimum-time shooting aims inside).
+pub const SETTLE_POSITION_TOL_M: f64 = capsule_mpc_runtime::solver::shooting::BAND_POSITION_M;
 /// Settling band on each speed, m/s (strict: |v| < this).
-pub const SETTLE_SPEED_TOL_M_PER_S: f64 = 5e-3;
+pub const SETTLE_SPEED_TOL_M_PER_S: f64 = capsule_mpc_runtime::solver::shooting::BAND_SPEED_M_PER_S;
 
 /// Summary of one closed-loop run (the `metrics` object of `simulate --json`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -22,7 +22,8 @@ use crate::spec::Spec;
 pub const SHOT_POSITION_TOLERANCE_M: f64 = 1e-4;
 pub const SHOT_SPEED_TOLERANCE_M_PER_S: f64 = 5e-4;
 
-/// The settle band: within this of the target (m) and below this speed.
+/// The settle band: within this of the target (m) and below this speed
+/// (m/s); the simulator's settle metrics read the same constants.
 pub const BAND_POSITION_M: f64 = 1e-3;
 pub const BAND_SPEED_M_PER_S: f64 = 5e-3;
 
