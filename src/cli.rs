@@ -378,6 +378,10 @@ pub struct ReachArgs {
     /// (one for all or one per capsule).
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub plant_gain_scale: Option<Vec<f64>>,
+    /// Minimum-time shots (experimental law, off by default; see
+    /// `simulate --shooting`).
+    #[arg(long)]
+    pub shooting: bool,
     /// Simulated time per run, s (default: long enough for the grid).
     #[arg(long, value_parser = positive_seconds)]
     pub duration: Option<f64>,

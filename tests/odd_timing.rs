@@ -76,6 +76,7 @@ fn every_target_is_approached_with_60_ms_gaps() {
         duration_s: None,
         extra_delay_s: Some(0.04),
         mismatch: Default::default(),
+        shooting: false,
     };
     let points = reach_map(&config, &opts, &|| {}).unwrap();
     let summary = ReachSummary::of(&points);

@@ -42,6 +42,8 @@ pub struct ReachOptions {
     pub extra_delay_s: Option<f64>,
     /// How the simulated capsules differ from the model (none by default).
     pub mismatch: crate::mismatch::PlantMismatch,
+    /// Minimum-time shots (`RunOptions::shooting`; off by default).
+    pub shooting: bool,
 }
 
 /// Simulated time per run when none is given: 3 s plus 0.5 s per cm of the
@@ -189,6 +191,7 @@ pub fn reach_map(
             run_opts.seed = opts.seed;
             run_opts.duration_s = duration_s;
             run_opts.mismatch = opts.mismatch.clone();
+            run_opts.shooting = opts.shooting;
             if let Some(d) = opts.extra_delay_s {
                 run_opts.extra_delay_s = d;
             }
