@@ -141,13 +141,13 @@ fn controller_cycles_do_not_allocate() {
             assert_eq!(n, 0, "cycle ({sampling:?}) allocated {n} times");
             total_calls += positions.len();
 
-            // On the host's clock, tracking phases of 10-60 ms (cycle_at).
+            // On the host's clock, tracking phases of 5-30 ms (cycle_at).
             ctl.reset(&[0.0; spec::M]).unwrap();
             let (_, n) = counted(|| {
                 let mut t = 0.0;
                 for (k, z) in positions.iter().enumerate() {
                     let z = if k % 17 == 5 { None } else { Some(&z[..]) };
-                    let t_act = t + 0.01 * (1 + k % 6) as f64;
+                    let t_act = t + 0.005 * (1 + k % 6) as f64;
                     let out = ctl.cycle_at(z, t, t_act).unwrap();
                     t = t_act + out.actuation_samples as f64 * spec::DT_S;
                 }

@@ -201,38 +201,39 @@ fn paper_switching_rule_is_too_conservative_to_extend() {
     }
 }
 
-/// With a 30 ms compute/transfer delay, predicting through tracking + delay
-/// beats solving from the stale measurement (the paper's way): measured
-/// over seeds 1-3, compensated settles in 1.3-2.2 s, uncompensated in
-/// 2.6-3.9 s (before the minimum-time tables: 3.8-4.7 s against one
-/// settle in three).
+/// With a 10 ms compute/transfer delay (a 30 ms gap, the proven range's
+/// end), predicting through tracking + delay beats solving from the stale
+/// measurement (the paper's way): A and C, seeds 1-8, the sums of settle
+/// times are 23.1 s compensated against 30.7 s (0.75). With 30 ms of delay,
+/// before such gaps were refused, it was 1.3-2.2 s against 2.6-3.9 s.
 #[test]
 fn delay_compensation_is_measurably_better() {
     let (mut settle_comp, mut settle_raw) = (0.0, 0.0);
-    for seed in 1..=3 {
-        for compensate in [true, false] {
-            let (config, mut opts) = options(&A, Sampling::Constant, DisturbanceLevel::Paper, seed);
-            opts.duration_s = 6.0;
-            opts.extra_delay_s = 0.03;
-            opts.compensate_delay = compensate;
-            let m = run(&config, &opts).unwrap().metrics;
-            if compensate {
-                let t = m.settle_time_s.expect("compensated runs must all settle");
-                settle_comp += t;
-            } else {
-                // A run that never settles counts as the whole run.
-                settle_raw += m.settle_time_s.unwrap_or(opts.duration_s);
+    for target in [A, C] {
+        for seed in 1..=8 {
+            for compensate in [true, false] {
+                let (config, mut opts) =
+                    options(&target, Sampling::Constant, DisturbanceLevel::Paper, seed);
+                opts.duration_s = 6.0;
+                opts.extra_delay_s = 0.01;
+                opts.compensate_delay = compensate;
+                let m = run(&config, &opts).unwrap().metrics;
+                if compensate {
+                    let t = m.settle_time_s.expect("compensated runs must all settle");
+                    settle_comp += t;
+                } else {
+                    // A run that never settles counts as the whole run.
+                    settle_raw += m.settle_time_s.unwrap_or(opts.duration_s);
+                }
             }
         }
     }
     println!(
-        "mean settle: compensated {:.3} s, uncompensated {:.3} s",
-        settle_comp / 3.0,
-        settle_raw / 3.0
+        "settle sums over 16 runs: compensated {settle_comp:.3} s, uncompensated {settle_raw:.3} s"
     );
     assert!(
-        settle_comp <= 0.75 * settle_raw,
-        "compensated {settle_comp} s vs uncompensated {settle_raw} s (sums over 3 seeds)"
+        settle_comp <= 0.85 * settle_raw,
+        "compensated {settle_comp} s vs uncompensated {settle_raw} s (sums over A, C x 8 seeds)"
     );
 }
 

@@ -11,7 +11,7 @@ use capsule_mpc_generator::config::{Config, ConfigError, DEFAULT_CONFIG_TOML};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{
     braking_gradient, ControllerSettings, Sampling, SwitchingRule, MAX_ABS_POSITION_M,
-    MAX_ABS_SPEED_M_PER_S, MAX_CYCLE_GAP_S, SETTING_NAMES, TIME_TOLERANCE_S,
+    MAX_ABS_SPEED_M_PER_S, PROVEN_EXTRA_GAP_S, SETTING_NAMES, TIME_TOLERANCE_S,
 };
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
 use capsule_mpc_runtime::generated::controller::Solver;
@@ -106,7 +106,7 @@ prop_compose! {
         disturbance in disturbance(),
         seed in any::<u64>(),
         noise_m in prop_oneof![Just(0.0), 0.0..=1e-3f64],
-        extra_delay_s in prop_oneof![Just(0.0), 0.0..=0.02f64],
+        extra_delay_s in prop_oneof![Just(0.0), 0.0..=PROVEN_EXTRA_GAP_S],
         max_actuation_samples in 1..=N,
         lose_every in proptest::option::of(2..10usize),
         cycles in 5..60usize,
@@ -374,6 +374,11 @@ proptest! {
                 prop_assert!(start.iter().any(|p| !p.is_finite()));
                 return Ok(());
             }
+            Err(RuntimeError::GapBeyondProven { gap_s, max_s }) => {
+                prop_assert_eq!(gap_s, s.tracking_time_s + s.extra_delay_s);
+                prop_assert!(gap_s > max_s, "{} <= {}", gap_s, max_s);
+                return Ok(());
+            }
             Err(RuntimeError::OutsideWorkspace { argument: "positions_m", capsule, .. }) => {
                 prop_assert!(!(spec::WORKSPACE_MIN_M..=spec::WORKSPACE_MAX_M).contains(&start[capsule]));
                 return Ok(());
@@ -432,11 +437,20 @@ proptest! {
                                 !t_meas.is_finite()
                                     || !t_act.is_finite()
                                     || t_act < t_meas
-                                    || dm < -TIME_TOLERANCE_S
-                                    || dm + da > MAX_CYCLE_GAP_S
-                                    || t_act - t_meas > MAX_CYCLE_GAP_S,
+                                    || dm < -TIME_TOLERANCE_S,
                                 "{} refused at {} / {}",
                                 name,
+                                dm,
+                                da
+                            );
+                        }
+                        Err(RuntimeError::GapBeyondProven { gap_s, max_s }) => {
+                            prop_assert_eq!(max_s, DefaultController::MAX_GAP_S);
+                            prop_assert!(
+                                gap_s > max_s + TIME_TOLERANCE_S
+                                    && (dm > max_s || da > max_s || dm + da > max_s),
+                                "gap {} refused at {} / {}",
+                                gap_s,
                                 dm,
                                 da
                             );

@@ -157,7 +157,7 @@ fn timing_off_the_raster_is_refused_before_the_run() {
             "--sampling",
             "variable",
             "--extra-delay",
-            "0.0123456",
+            "0.0023456",
         ])
         .arg("--pulseq")
         .arg(&seq)

@@ -27,7 +27,7 @@
 
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_generator::model::Model;
-use capsule_mpc_runtime::controller::{Sampling, GLITCH_FRAMES, MAX_CYCLE_GAP_S};
+use capsule_mpc_runtime::controller::{Sampling, GLITCH_FRAMES};
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, NX};
 use capsule_mpc_runtime::{CycleOutput, DefaultController, RuntimeError, RuntimeStatus};
 use capsule_mpc_sim::plant::{DisturbanceLevel, Phase, Plant};
@@ -446,9 +446,9 @@ fn a_glitch_longer_than_glitch_frames_is_reacquired_and_undone() {
 }
 
 /// Settle bound for time-stamped tracking phases, s (settled = in the band
-/// for at least HELD_S). Constant sampling at 60 ms plays 20 ms of every
-/// 80 ms (duty 0.25), so its bound is generous; before the fix those runs
-/// never settled.
+/// for at least HELD_S). Constant sampling at 30 ms plays 20 ms of every
+/// 50 ms (duty 0.4), so its bound is generous; before the fix runs with
+/// longer phases never settled.
 const TIMED_SETTLE_BOUND_S: f64 = 6.0;
 
 fn timed_grid(sampling: Sampling) {
@@ -457,9 +457,9 @@ fn timed_grid(sampling: Sampling) {
     for (name, tracking) in [
         ("10 ms", Tracking::Fixed(0.01)),
         ("20 ms", Tracking::Fixed(0.02)),
-        ("40 ms", Tracking::Fixed(0.04)),
-        ("60 ms", Tracking::Fixed(0.06)),
-        ("10-60 ms", Tracking::Jitter(0.01, 0.06)),
+        ("25 ms", Tracking::Fixed(0.025)),
+        ("30 ms", Tracking::Fixed(0.03)),
+        ("10-30 ms", Tracking::Jitter(0.01, 0.03)),
     ] {
         let mut settles = Vec::new();
         for target in [A, C] {
@@ -493,8 +493,8 @@ fn timed_grid(sampling: Sampling) {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// Time-stamped tracking phases of 10, 20, 40 and 60 ms and a jittering
-/// 10-60 ms, constant sampling: the loop settles.
+/// Time-stamped tracking phases of 10, 20, 25 and 30 ms and a jittering
+/// 10-30 ms, constant sampling: the loop settles.
 #[test]
 fn timed_tracking_phases_settle_constant_sampling() {
     timed_grid(Sampling::Constant);
@@ -506,7 +506,7 @@ fn timed_tracking_phases_settle_variable_sampling() {
     timed_grid(Sampling::Variable);
 }
 
-/// The time stamps matter: the same frames with a 40 ms tracking phase
+/// The time stamps matter: the same frames with a 30 ms tracking phase
 /// time-stamped as such give another estimate at the actuation start than
 /// the configured 20 ms (`cycle`), and the estimate follows the model
 /// through the real gap.
@@ -517,10 +517,10 @@ fn the_estimate_is_predicted_through_the_real_gap() {
     let mut b = a.clone();
     let mut c = a.clone();
     // A first cycle at rest, then one from a known moving estimate.
-    let out_a = a.cycle_at(Some(&[0.0, 0.0]), 0.0, 0.04).unwrap();
+    let out_a = a.cycle_at(Some(&[0.0, 0.0]), 0.0, 0.03).unwrap();
     let out_b = b.cycle_at(Some(&[0.0, 0.0]), 0.0, 0.02).unwrap();
     let out_c = c.cycle(Some(&[0.0, 0.0])).unwrap();
-    assert_eq!(a.actuation_end_s(), Some(0.04 + spec::DT_S));
+    assert_eq!(a.actuation_end_s(), Some(0.03 + spec::DT_S));
     assert_eq!(b.actuation_end_s(), Some(0.02 + spec::DT_S));
     // At rest, the prediction through u = 0 is the frame itself.
     assert_eq!(out_a.estimate[..NX], out_b.estimate[..NX]);
@@ -528,17 +528,17 @@ fn the_estimate_is_predicted_through_the_real_gap() {
     let moving_a = a.estimate();
     let moving_b = b.estimate();
     assert!(moving_a[1].abs() > 1e-3, "{moving_a:?}");
-    // Next frame at the actuation end, actuation 60 ms (a) / 20 ms (b)
-    // later: a's estimate coasts three times as long.
+    // Next frame at the actuation end, actuation 30 ms (a) / 20 ms (b)
+    // later: a's estimate coasts 1.5 times as long.
     let za = [moving_a[0], moving_a[2]];
     let zb = [moving_b[0], moving_b[2]];
     let t_a = a.actuation_end_s().unwrap();
     let t_b = b.actuation_end_s().unwrap();
-    let out_a = a.cycle_at(Some(&za), t_a, t_a + 0.06).unwrap();
+    let out_a = a.cycle_at(Some(&za), t_a, t_a + 0.03).unwrap();
     let out_b = b.cycle_at(Some(&zb), t_b, t_b + 0.02).unwrap();
     use capsule_mpc_runtime::solver::PlanSolver;
     type S = capsule_mpc_runtime::generated::controller::Solver;
-    let expect_a = <S as PlanSolver<NX, K>>::predict_constant(&moving_a, 0.0, 0.06);
+    let expect_a = <S as PlanSolver<NX, K>>::predict_constant(&moving_a, 0.0, 0.03);
     let expect_b = <S as PlanSolver<NX, K>>::predict_constant(&moving_b, 0.0, 0.02);
     for j in 0..NX {
         assert!((out_a.estimate[j] - expect_a[j]).abs() < 1e-6, "{j}");
@@ -575,7 +575,10 @@ fn implausible_time_stamps_are_refused_by_name() {
             "+1000 s",
             end + 1000.0,
             end + 1000.02,
-            RuntimeError::BadTime("t_measured_s"),
+            RuntimeError::GapBeyondProven {
+                gap_s: (end + 1000.0) - end,
+                max_s: DefaultController::MAX_GAP_S,
+            },
         ),
         (
             "actuation before measurement",
@@ -584,10 +587,14 @@ fn implausible_time_stamps_are_refused_by_name() {
             RuntimeError::BadTime("t_actuation_start_s"),
         ),
         (
-            "gap above the limit",
-            end + 0.5,
-            end + MAX_CYCLE_GAP_S + 0.01,
-            RuntimeError::BadTime("t_actuation_start_s"),
+            "gap beyond the proven range",
+            end + 0.01,
+            end + DefaultController::MAX_GAP_S + 0.002,
+            RuntimeError::GapBeyondProven {
+                gap_s: ((end + 0.01) - end)
+                    + ((end + DefaultController::MAX_GAP_S + 0.002) - (end + 0.01)),
+                max_s: DefaultController::MAX_GAP_S,
+            },
         ),
         (
             "NaN measurement",

@@ -10,7 +10,7 @@
  * Not thread-safe per handle; separate handles are independent.
  *
  * Every function returns CAPSULE_MPC_OK (0) or a negative error code, except
- * the three constant queries. On error nothing changes and no output is
+ * the four constant queries. On error nothing changes and no output is
  * written. Units: SI (m, m/s, s, T/m). Times are the host's scanner clock in
  * seconds (any origin; it restarts at init and reset).
  *
@@ -18,6 +18,7 @@
  *   capsule_mpc_dimensions / capsule_mpc_abi_version   (check the build)
  *   capsule_mpc_init(buf, size, positions, M)
  *   capsule_mpc_set_sampling(h, mode)                  (optional, before the loop)
+ *   capsule_mpc_set_timing(h, tracking_s, delay_s)     (optional, before the loop)
  *   capsule_mpc_set_target(h, target, 2M)
  *   loop: tracking phase (u = 0), then
  *         capsule_mpc_feed_tracking(h, positions, M, t_measured, lost)
@@ -29,19 +30,24 @@
  * actuation phase (its start + samples x sample time) through the
  * measurement to the actuation start you give, and plans for the gaps these
  * times show. Tracking phases may vary from cycle to cycle; report the
- * true times. Proven range (examples/c_host, target (2, -1) cm, 0.05 mm
- * noise): with tracking + delay up to 60 ms the loop settles within 3x its
- * 20 ms time (constant sampling 2.16 s against 1.08 s, variable 2.58 s
- * against 1.00 s); at 100 ms it does not settle within 6 s. Not every
- * target is as good: over a 1 cm grid in +-5 cm (plant simulator, 0.2 mm
- * noise, the paper's disturbance, seeds 1-2), 60 ms gaps leave 5 of 240
- * runs unsettled after 8 s under constant sampling and none of 240 under
- * variable sampling (docs/known-limits.md). Longer gaps are accepted (up
- * to the 1 s below) but not proven to settle. A measurement more than 1 ms before the end
- * of the last actuation phase (time going backwards) or more than 1 s after
- * it, or an actuation start before its measurement or more than 1 s after
- * the last actuation ended, is refused with CAPSULE_MPC_ERR_BAD_TIME. After
- * a longer pause, call capsule_mpc_reset.
+ * true times. Proven range, enforced: tracking + delay per cycle (end of
+ * one actuation phase to the start of the next) of at most
+ * capsule_mpc_max_gap_s(), the generated config's tracking time + delay +
+ * 10 ms (30 ms for the default config). Over a 1 cm grid of targets in
+ * +-4 cm (0.2 mm noise, the paper's disturbance, seeds 1-8, 640 runs per
+ * sampling) every run settles with 30 ms gaps, the worst at 6.2 s
+ * constant / 3.8 s variable against 2.6 / 5.2 s with 20 ms (within 3x);
+ * with 40 ms the constant worst is 2.9x, with 50 ms some runs do not
+ * settle in 10 s, with 80 ms half of them (docs/known-limits.md). So the
+ * loop refuses, with
+ * CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN: capsule_mpc_set_timing beyond it (at
+ * set-up), and any cycle whose measurement or actuation start lies more
+ * than capsule_mpc_max_gap_s() (+ 1 ms) after the end of the last
+ * actuation phase; after such a pause, call capsule_mpc_reset. For a
+ * longer tracking phase, regenerate the controller with it
+ * (scanner.tracking_time_s). A measurement more than 1 ms before the end
+ * of the last actuation phase (time going backwards), or an actuation
+ * start before its measurement, is refused with CAPSULE_MPC_ERR_BAD_TIME.
  */
 #ifndef CAPSULE_MPC_H
 #define CAPSULE_MPC_H
@@ -53,7 +59,7 @@
 extern "C" {
 #endif
 
-#define CAPSULE_MPC_ABI_VERSION 4u
+#define CAPSULE_MPC_ABI_VERSION 5u
 
 /* Error codes. */
 #define CAPSULE_MPC_OK 0
@@ -66,11 +72,12 @@ extern "C" {
 #define CAPSULE_MPC_ERR_BAD_MODE (-7)        /* not a CAPSULE_MPC_SAMPLING_* value */
 #define CAPSULE_MPC_ERR_NOT_INITIALIZED (-8)
 #define CAPSULE_MPC_ERR_BAD_SETTING (-9)
-#define CAPSULE_MPC_ERR_BAD_TIME (-10)       /* time going backwards or jumping (see Timing) */
+#define CAPSULE_MPC_ERR_BAD_TIME (-10)       /* time going backwards (see Timing) */
 #define CAPSULE_MPC_ERR_WRONG_FEED (-11)     /* feed_state outside ideal sampling, feed_tracking in it */
-#define CAPSULE_MPC_ERR_LOOP_RUNNING (-12)   /* set_sampling after the loop started: reset first */
+#define CAPSULE_MPC_ERR_LOOP_RUNNING (-12)   /* set_sampling/set_timing after the loop started: reset first */
 #define CAPSULE_MPC_ERR_TARGET_NOT_AT_REST (-13) /* a target speed is not 0 */
 #define CAPSULE_MPC_ERR_CORRUPT_TABLES (-14) /* the compiled-in table file failed its SHA-256 check */
+#define CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN (-15) /* tracking + delay > capsule_mpc_max_gap_s() (see Timing) */
 
 /* Sampling modes (capsule_mpc_set_sampling). */
 #define CAPSULE_MPC_SAMPLING_IDEAL 0
@@ -138,6 +145,10 @@ uint32_t capsule_mpc_abi_version(void);
 size_t capsule_mpc_workspace_size(void);
 size_t capsule_mpc_workspace_align(void);
 
+/* The longest tracking + delay per cycle the loop accepts, s (the proven
+ * range, see Timing). */
+double capsule_mpc_max_gap_s(void);
+
 /* Build dimensions: capsule count M, online horizon N (the largest number of
  * samples one cycle returns), plan length, sample time and gradient bound. */
 int32_t capsule_mpc_dimensions(uint32_t *capsules, uint32_t *horizon, uint32_t *plan_len,
@@ -168,9 +179,16 @@ int32_t capsule_mpc_set_target(capsule_mpc_t *handle, const double *target, size
  * CAPSULE_MPC_ERR_LOOP_RUNNING (setting the current mode is always OK). */
 int32_t capsule_mpc_set_sampling(capsule_mpc_t *handle, int32_t mode);
 
+/* The tracking phase and the extra delay after it, s, that the plans model
+ * until time-stamped cycles have measured the gaps (default: the generated
+ * config's). Only before the loop, as set_sampling (LOOP_RUNNING after).
+ * GAP_BEYOND_PROVEN when their sum exceeds capsule_mpc_max_gap_s(),
+ * BAD_SETTING when one is negative, NON_FINITE when one is not finite. */
+int32_t capsule_mpc_set_timing(capsule_mpc_t *handle, double tracking_time_s, double extra_delay_s);
+
 /* One tracking frame (constant or variable sampling; WRONG_FEED under ideal):
  * positions (n = M) measured at the start of the tracking phase that just
- * ended, at time t_measured_s (finite; BAD_TIME, see Timing). lost != 0: no
+ * ended, at time t_measured_s (finite; BAD_TIME / GAP_BEYOND_PROVEN, see Timing). lost != 0: no
  * frame (positions_m may be NULL). A later feed replaces an earlier one. */
 int32_t capsule_mpc_feed_tracking(capsule_mpc_t *handle, const double *positions_m, size_t n,
                                   double t_measured_s, int32_t lost);
@@ -180,7 +198,8 @@ int32_t capsule_mpc_feed_tracking(capsule_mpc_t *handle, const double *positions
 int32_t capsule_mpc_feed_state(capsule_mpc_t *handle, const double *state, size_t n);
 
 /* Runs one cycle on the fed frame (none fed = lost) for an actuation that
- * starts at t_actuation_start_s (finite; BAD_TIME, see Timing; unused under
+ * starts at t_actuation_start_s (finite; BAD_TIME / GAP_BEYOND_PROVEN, see
+ * Timing; unused under
  * ideal sampling) and writes gradients_t_per_m[0..min(capacity, plan_len));
  * play the first *samples, one per sample time, from the actuation start.
  * capacity >= horizon. */

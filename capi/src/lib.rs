@@ -4,7 +4,7 @@
 //! [`capsule_mpc_workspace_align`], provides a buffer, and
 //! [`capsule_mpc_init`] constructs the controller in it. The handle is the
 //! buffer pointer. No call allocates. Every function returns an `int32_t`
-//! error code (`CAPSULE_MPC_OK` = 0, errors < 0) except the three constant
+//! error code (`CAPSULE_MPC_OK` = 0, errors < 0) except the four constant
 //! queries; on error nothing changes and no output is written.
 //!
 //! The header `include/capsule_mpc.h` is hand-written; `tests/header.rs`
@@ -18,7 +18,7 @@
 
 #![deny(unsafe_op_in_unsafe_fn)]
 
-use capsule_mpc_runtime::controller::{Refine, Sampling};
+use capsule_mpc_runtime::controller::{ControllerSettings, Refine, Sampling};
 use capsule_mpc_runtime::generated::controller::Solver;
 use capsule_mpc_runtime::generated::{PlanSolver, Tier};
 use capsule_mpc_runtime::{DefaultController, RuntimeError, RuntimeStatus};
@@ -26,7 +26,7 @@ use core::mem::{align_of, size_of};
 use core::ptr;
 
 /// ABI version: bumped on any change of a signature, struct or constant.
-pub const CAPSULE_MPC_ABI_VERSION: u32 = 4;
+pub const CAPSULE_MPC_ABI_VERSION: u32 = 5;
 
 pub const CAPSULE_MPC_OK: i32 = 0;
 pub const CAPSULE_MPC_ERR_NULL_POINTER: i32 = -1;
@@ -44,6 +44,8 @@ pub const CAPSULE_MPC_ERR_LOOP_RUNNING: i32 = -12;
 pub const CAPSULE_MPC_ERR_TARGET_NOT_AT_REST: i32 = -13;
 /// The compiled-in table file failed its integrity check (SHA-256).
 pub const CAPSULE_MPC_ERR_CORRUPT_TABLES: i32 = -14;
+/// Tracking + delay beyond the proven range (`capsule_mpc_max_gap_s`).
+pub const CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN: i32 = -15;
 
 pub const CAPSULE_MPC_SAMPLING_IDEAL: i32 = 0;
 pub const CAPSULE_MPC_SAMPLING_CONSTANT: i32 = 1;
@@ -126,6 +128,7 @@ fn map_err(e: RuntimeError) -> i32 {
         RuntimeError::BadTime(_) => CAPSULE_MPC_ERR_BAD_TIME,
         RuntimeError::TargetNotAtRest => CAPSULE_MPC_ERR_TARGET_NOT_AT_REST,
         RuntimeError::CorruptTables(_) => CAPSULE_MPC_ERR_CORRUPT_TABLES,
+        RuntimeError::GapBeyondProven { .. } => CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN,
     }
 }
 
@@ -203,6 +206,14 @@ pub extern "C" fn capsule_mpc_workspace_size() -> usize {
 #[no_mangle]
 pub extern "C" fn capsule_mpc_workspace_align() -> usize {
     align_of::<CapsuleMpc>()
+}
+
+/// The longest tracking + delay per cycle (end of one actuation phase to
+/// the start of the next) the loop is proven to settle with, s; longer
+/// ones are refused with `CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN`.
+#[no_mangle]
+pub extern "C" fn capsule_mpc_max_gap_s() -> f64 {
+    DefaultController::MAX_GAP_S
 }
 
 /// The build's dimensions, so a host checks it links what it expects.
@@ -358,23 +369,61 @@ pub unsafe extern "C" fn capsule_mpc_set_sampling(handle: *mut CapsuleMpc, mode:
         if ws.running {
             return Err(CAPSULE_MPC_ERR_LOOP_RUNNING);
         }
-        // The runtime fixes settings at construction: rebuild, then commit.
         let mut settings = *ws.controller.settings();
         settings.sampling = sampling;
-        let x = ws.controller.estimate();
-        let mut positions = [0.0; M];
-        for (i, p) in positions.iter_mut().enumerate() {
-            *p = x[2 * i];
-        }
-        let mut c = DefaultController::new(settings, &positions).map_err(map_err)?;
-        if let Some(t) = ws.controller.target() {
-            c.set_target(t).map_err(map_err)?;
-        }
-        ws.controller = c;
-        ws.pending = Pending::Nothing;
-        Ok(())
+        rebuild(ws, settings)
     })();
     code(r)
+}
+
+/// Sets the tracking phase and the extra delay after it, s, that the plans
+/// model until the first time-stamped cycles have measured the gaps
+/// (default: the generated config's). Before the loop starts
+/// (LOOP_RUNNING after; reset first). Refused with GAP_BEYOND_PROVEN when
+/// their sum exceeds `capsule_mpc_max_gap_s()`, BAD_SETTING when one is
+/// negative, NON_FINITE when one is not finite.
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_set_timing(
+    handle: *mut CapsuleMpc,
+    tracking_time_s: f64,
+    extra_delay_s: f64,
+) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; workspace checks the handle.
+        let ws = unsafe { workspace(handle) }?;
+        if !tracking_time_s.is_finite() || !extra_delay_s.is_finite() {
+            return Err(CAPSULE_MPC_ERR_NON_FINITE);
+        }
+        if ws.running {
+            return Err(CAPSULE_MPC_ERR_LOOP_RUNNING);
+        }
+        let mut settings = *ws.controller.settings();
+        settings.tracking_time_s = tracking_time_s;
+        settings.extra_delay_s = extra_delay_s;
+        rebuild(ws, settings)
+    })();
+    code(r)
+}
+
+/// The runtime fixes settings at construction: rebuilds the controller
+/// with `settings` at the current estimate and target, then commits (on
+/// error nothing changes).
+fn rebuild(ws: &mut CapsuleMpc, settings: ControllerSettings) -> Res {
+    let x = ws.controller.estimate();
+    let mut positions = [0.0; M];
+    for (i, p) in positions.iter_mut().enumerate() {
+        *p = x[2 * i];
+    }
+    let mut c = DefaultController::new(settings, &positions).map_err(map_err)?;
+    if let Some(t) = ws.controller.target() {
+        c.set_target(t).map_err(map_err)?;
+    }
+    ws.controller = c;
+    ws.pending = Pending::Nothing;
+    Ok(())
 }
 
 /// Feeds one tracking frame (constant or variable sampling; WRONG_FEED
@@ -384,7 +433,8 @@ pub unsafe extern "C" fn capsule_mpc_set_sampling(handle: *mut CapsuleMpc, mode:
 /// NULL and `n` is ignored. A later feed replaces an earlier one.
 /// `t_measured_s` is refused with BAD_TIME when it lies before the end of
 /// the last actuation phase returned (by more than 1 ms: time going
-/// backwards) or more than 1 s after it.
+/// backwards), with GAP_BEYOND_PROVEN when it lies more than
+/// `capsule_mpc_max_gap_s()` after it.
 ///
 /// # Safety
 /// `handle` as for `capsule_mpc_reset`; `positions_m` must point to `n`
@@ -451,12 +501,13 @@ pub unsafe extern "C" fn capsule_mpc_feed_state(
 ///
 /// Constant and variable sampling predict the estimate from the end of the
 /// previous actuation phase through the measurement to
-/// `t_actuation_start_s` and plan for the gaps these times show, so any
-/// tracking length works. BAD_TIME when `t_actuation_start_s` is before
-/// the frame's measurement time or more than 1 s after the end of the
-/// previous actuation phase (the first cycle after init or reset: after
-/// the measurement). Under ideal sampling the time must be finite and is
-/// otherwise unused.
+/// `t_actuation_start_s` and plan for the gaps these times show: tracking
+/// lengths may vary up to `capsule_mpc_max_gap_s()`. BAD_TIME when
+/// `t_actuation_start_s` is before the frame's measurement time;
+/// GAP_BEYOND_PROVEN when it lies more than `capsule_mpc_max_gap_s()`
+/// after the end of the previous actuation phase (the first cycle after
+/// init or reset: after the measurement). Under ideal sampling the time
+/// must be finite and is otherwise unused.
 ///
 /// # Safety
 /// `handle` as for `capsule_mpc_reset`; `gradients_t_per_m` must be valid

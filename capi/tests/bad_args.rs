@@ -199,6 +199,7 @@ fn every_handle_fn_returns(h: *mut CapsuleMpc, expected: i32) {
             expected,
             "set_sampling"
         );
+        assert_eq!(capsule_mpc_set_timing(h, 0.02, 0.0), expected, "set_timing");
         assert_eq!(
             capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
             expected,
@@ -389,6 +390,97 @@ fn set_sampling_bad_mode() {
                 "mode {mode}"
             );
         }
+    }
+}
+
+/// The tracking time and delay: beyond the proven range refused at set-up
+/// (GAP_BEYOND_PROVEN), negative or non-finite refused, after the loop
+/// started refused; at the range's end accepted.
+#[test]
+fn set_timing_refuses_beyond_the_proven_range() {
+    let max_gap_s = capsule_mpc_max_gap_s();
+    // The default config: 20 ms tracking, 10 ms more proven.
+    assert!((max_gap_s - 0.03).abs() < 1e-12, "{max_gap_s}");
+    let mut b = initialized();
+    let h = handle(&mut b);
+    unsafe {
+        for (tracking_s, delay_s) in [(0.1, 0.0), (0.02, 0.012), (0.0, 0.04), (1.0, 1.0)] {
+            assert_eq!(
+                capsule_mpc_set_timing(h, tracking_s, delay_s),
+                CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN,
+                "{tracking_s} + {delay_s}"
+            );
+        }
+        for (tracking_s, delay_s) in [(-0.01, 0.0), (0.02, -1e-3)] {
+            assert_eq!(
+                capsule_mpc_set_timing(h, tracking_s, delay_s),
+                CAPSULE_MPC_ERR_BAD_SETTING,
+                "{tracking_s} + {delay_s}"
+            );
+        }
+        for bad in [f64::NAN, f64::INFINITY] {
+            assert_eq!(
+                capsule_mpc_set_timing(h, bad, 0.0),
+                CAPSULE_MPC_ERR_NON_FINITE
+            );
+            assert_eq!(
+                capsule_mpc_set_timing(h, 0.02, bad),
+                CAPSULE_MPC_ERR_NON_FINITE
+            );
+        }
+        assert_eq!(capsule_mpc_set_timing(h, 0.025, 0.005), CAPSULE_MPC_OK);
+        assert_eq!(capsule_mpc_set_timing(h, 0.02, 0.0), CAPSULE_MPC_OK);
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
+        let mut grads = [0.0; 256];
+        let (mut samples, mut status) = (0u32, 0i32);
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(h, 0.02, grads.as_mut_ptr(), 256, &mut samples, &mut status),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_set_timing(h, 0.03, 0.0),
+            CAPSULE_MPC_ERR_LOOP_RUNNING
+        );
+        // The next frame more than the proven gap after the actuation end.
+        let end_s = 0.02 + samples as f64 * 0.02;
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, end_s + max_gap_s + 0.002, 0),
+            CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN
+        );
+        // Within it, then an actuation start that makes the gap too long.
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, end_s + 0.001, 0),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(
+                h,
+                end_s + max_gap_s + 0.002,
+                grads.as_mut_ptr(),
+                256,
+                &mut samples,
+                &mut status
+            ),
+            CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(
+                h,
+                end_s + max_gap_s,
+                grads.as_mut_ptr(),
+                256,
+                &mut samples,
+                &mut status
+            ),
+            CAPSULE_MPC_OK
+        );
     }
 }
 
@@ -641,12 +733,18 @@ fn next_actuation_last_status_estimate_bad_args() {
                 CAPSULE_MPC_ERR_NON_FINITE
             );
         }
-        // The frame was measured at 0 s: an actuation before it, or more
-        // than 1 s after it, is refused.
-        for t in [-0.001, 1.5, 1000.0] {
+        // The frame was measured at 0 s: an actuation before it is
+        // refused as time going backwards, one beyond the proven gap after
+        // it as such.
+        assert_eq!(
+            capsule_mpc_next_actuation(h, -0.001, g, n, &mut samples, &mut status),
+            CAPSULE_MPC_ERR_BAD_TIME
+        );
+        let max_gap_s = capsule_mpc_max_gap_s();
+        for t in [max_gap_s + 0.002, 0.1, 1.5, 1000.0] {
             assert_eq!(
                 capsule_mpc_next_actuation(h, t, g, n, &mut samples, &mut status),
-                CAPSULE_MPC_ERR_BAD_TIME,
+                CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN,
                 "{t}"
             );
         }

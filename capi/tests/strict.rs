@@ -160,9 +160,10 @@ fn target_speeds_must_be_zero() {
     );
 }
 
-/// Time stamps that go backwards or jump by 1000 s are refused with
-/// BAD_TIME (the feed: the measurement time; the actuation: its start),
-/// and change nothing: the pending frame stays, the next good call works.
+/// Time stamps that go backwards are refused with BAD_TIME, gaps beyond
+/// the proven range (100 ms, 1000 s) with GAP_BEYOND_PROVEN (the feed: the
+/// measurement time; the actuation: its start), and change nothing: the
+/// pending frame stays, the next good call works.
 #[test]
 fn implausible_time_stamps_are_refused() {
     let mut grads = [0.0; 64];
@@ -179,29 +180,32 @@ fn implausible_time_stamps_are_refused() {
     let end = 0.02 + f64::from(n) * SAMPLE_S;
     let x = estimate(h);
     let z = [x[0], x[2]];
-    for (what, bad_t) in [
-        ("backwards", end - 0.01),
-        ("zero again", 0.0),
-        ("+1000 s", end + 1000.0),
+    let beyond = CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN;
+    for (what, bad_t, error) in [
+        ("backwards", end - 0.01, CAPSULE_MPC_ERR_BAD_TIME),
+        ("zero again", 0.0, CAPSULE_MPC_ERR_BAD_TIME),
+        ("+100 ms", end + 0.1, beyond),
+        ("+1000 s", end + 1000.0, beyond),
     ] {
-        assert_eq!(feed(h, &z, bad_t), CAPSULE_MPC_ERR_BAD_TIME, "{what}");
+        assert_eq!(feed(h, &z, bad_t), error, "{what}");
         assert_eq!(
             unsafe { capsule_mpc_feed_tracking(h, null(), 0, bad_t, 1) },
-            CAPSULE_MPC_ERR_BAD_TIME,
+            error,
             "{what}, lost"
         );
     }
     assert_eq!(estimate(h), x);
     assert_eq!(feed(h, &z, end), CAPSULE_MPC_OK);
-    for (what, bad_t) in [
-        ("before the measurement", end - 0.001),
-        ("+1000 s", end + 1000.0),
+    for (what, bad_t, error) in [
+        (
+            "before the measurement",
+            end - 0.001,
+            CAPSULE_MPC_ERR_BAD_TIME,
+        ),
+        ("+100 ms", end + 0.1, beyond),
+        ("+1000 s", end + 1000.0, beyond),
     ] {
-        assert_eq!(
-            next(h, bad_t, &mut grads),
-            Err(CAPSULE_MPC_ERR_BAD_TIME),
-            "{what}"
-        );
+        assert_eq!(next(h, bad_t, &mut grads), Err(error), "{what}");
     }
     assert_eq!(estimate(h), x);
     // The frame is still pending and the cycle runs on it.
@@ -326,16 +330,17 @@ fn a_glitch_after_settling_is_recovered_through_the_c_abi() {
     }
 }
 
-/// Correctly time-stamped 40 and 60 ms tracking phases, and phases that
-/// jitter between 10 and 60 ms: the loop settles.
+/// Correctly time-stamped 25 and 30 ms tracking phases (the proven range's
+/// end), and phases that jitter between 10 and 30 ms: the loop settles.
 #[test]
 fn longer_and_jittering_tracking_phases_settle_through_the_c_abi() {
+    assert!((capsule_mpc_max_gap_s() - 0.03).abs() < 1e-12);
     for mode in [CAPSULE_MPC_SAMPLING_CONSTANT, CAPSULE_MPC_SAMPLING_VARIABLE] {
         for (what, tracking) in [
-            ("40 ms", &(|_| 0.04) as &dyn Fn(usize) -> f64),
-            ("60 ms", &|_| 0.06),
-            ("10-60 ms", &|k: usize| {
-                0.01 + 0.01 * ((k * 7 + 3) % 6) as f64
+            ("25 ms", &(|_| 0.025) as &dyn Fn(usize) -> f64),
+            ("30 ms", &|_| 0.03),
+            ("10-30 ms", &|k: usize| {
+                0.01 + 0.005 * ((k * 7 + 3) % 5) as f64
             }),
         ] {
             let (trace, _) = host_loop(mode, 6.0, tracking, |_| [0.0; 2]);

@@ -5,14 +5,15 @@
  *   x' = v,  v' = -b v|v| + g u,  g = 173.25, b = 134.7 and 16.84 1/m,
  * integrated with RK4 at 1 ms. Timeline per cycle: a tracking phase (u = 0,
  * positions measured at its start, 20 ms by default, or a length drawn
- * between 10 and 60 ms every cycle), then the actuation samples the
+ * between 10 and 30 ms every cycle), then the actuation samples the
  * controller returns (20 ms each), time-stamped on the host's clock.
  * Scenario C: target (0.02, 0, -0.01, 0) m from rest at the origin.
  *
  * Usage: c_host [mode] [noise_m] [tracking_s] [glitch_frames] [glitch_m] [refine]
  *        mode 0 ideal, 1 constant (default), 2 variable; noise_m: amplitude
  *        of deterministic measurement noise (default 5e-5 m); tracking_s:
- *        tracking phase length (default 0.02; 0 = jitter 10-60 ms);
+ *        tracking phase length (default 0.02; 0 = jitter 10-30 ms; beyond
+ *        capsule_mpc_max_gap_s(), 30 ms, refused at set-up);
  *        glitch_frames / glitch_m: that many frames from 2 s on report both
  *        positions glitch_m off (default 0 / 0.05).
  * Exit status 0 only when the capsules settle (both positions within 1 mm
@@ -116,6 +117,9 @@ int main(int argc, char **argv) {
     capsule_mpc_t *h = (capsule_mpc_t *)workspace;
     CHECK(capsule_mpc_set_sampling(h, mode));
     CHECK(capsule_mpc_set_refine(h, refine));
+    /* The tracking phase the plans model until the first gaps are measured
+     * (the jitter's longest); refused beyond the proven range. */
+    CHECK(capsule_mpc_set_timing(h, tracking_s > 0.0 ? tracking_s : 0.030, 0.0));
     CHECK(capsule_mpc_set_target(h, target, 2 * NCAP));
 
     double s[2 * NCAP] = {start[0], 0.0, start[1], 0.0};
@@ -145,8 +149,8 @@ int main(int argc, char **argv) {
                 band_since = -1.0;
             }
             double t_meas = t;
-            /* Tracking phase, gradients off: fixed, or 10-60 ms in whole ms. */
-            double track = tracking_s > 0.0 ? tracking_s : 0.001 * (10 + (int)((noise(&jitter_seed) + 1.0) * 25.49));
+            /* Tracking phase, gradients off: fixed, or 10-30 ms in whole ms. */
+            double track = tracking_s > 0.0 ? tracking_s : 0.001 * (10 + (int)((noise(&jitter_seed) + 1.0) * 10.49));
             hold(s, 0.0, track, &t);
             CHECK(capsule_mpc_feed_tracking(h, z, NCAP, t_meas, 0));
         }

@@ -652,7 +652,8 @@ fn run_controller<S: PlanSolver<NX2, K>, const NX2: usize, const K: usize>(
                 let (t_meas, t_act) = if sel % 4 == 0 {
                     (fuzzed[0], fuzzed[1])
                 } else {
-                    (end, end + 0.01 * f64::from(1 + sel % 6))
+                    // 5-30 ms: within the proven range (`MAX_GAP_S`).
+                    (end, end + 0.005 * f64::from(1 + sel % 6))
                 };
                 let frame = (sel & 16 == 0).then_some(&z[..m.min(2)]);
                 match c.cycle_at(frame, t_meas, t_act) {
@@ -669,6 +670,10 @@ fn run_controller<S: PlanSolver<NX2, K>, const NX2: usize, const K: usize>(
                             ["t_measured_s", "t_actuation_start_s"].contains(&name),
                             "{name}"
                         );
+                    }
+                    Err(RuntimeError::GapBeyondProven { gap_s, max_s }) => {
+                        assert!(sel % 4 == 0, "a gap within the range refused: {gap_s} s");
+                        assert!(gap_s > max_s, "{gap_s} <= {max_s}");
                     }
                     Err(e) => panic!("cycle_at: {e:?}"),
                 }

@@ -371,8 +371,10 @@ fn runtime_error(e: RuntimeError) -> PyErr {
         )),
         RuntimeError::NonFinite(a) => value_error(format!("{a}: a value is not finite")),
         RuntimeError::WrongLength(a) => value_error(format!("{a}: wrong number of values")),
-        RuntimeError::BadTime(a) => value_error(format!(
-            "{a}: time going backwards or jumping by more than 1 s"
+        RuntimeError::BadTime(a) => value_error(format!("{a}: time going backwards")),
+        RuntimeError::GapBeyondProven { gap_s, max_s } => value_error(format!(
+            "tracking + delay of {gap_s:.4} s is beyond the proven range ({max_s} s); \
+             regenerate for the longer tracking phase, or reset after a pause"
         )),
         other => value_error(format!("{other:?}")),
     }

@@ -75,7 +75,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// A controller with every capsule at rest at `positions_m`.
     pub fn new(settings: ControllerSettings, positions_m: &[f64]) -> Result<Self, RuntimeError> {
         const { assert!(NX <= K2 && NX.is_multiple_of(2)) };
-        check_settings(&settings, S::N, S::HAS_EXPLICIT_TIER)?;
+        check_settings(&settings, S::N, S::HAS_EXPLICIT_TIER, Self::MAX_GAP_S)?;
         S::verify_tables().map_err(RuntimeError::CorruptTables)?;
         let mut c = Controller {
             solver: S::new(),

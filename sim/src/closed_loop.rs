@@ -216,19 +216,37 @@ pub fn check_duration(duration_s: f64) -> Result<()> {
 /// The extra delay after each tracking phase must lie in
 /// `[0, MAX_EXTRA_DELAY_S]` s, the runtime's range (its error would only
 /// name the setting); the error says the value and the range.
-pub fn check_extra_delay(extra_delay_s: f64) -> Result<()> {
-    use capsule_mpc_runtime::controller::MAX_EXTRA_DELAY_S;
+pub fn check_extra_delay(config: &Config, extra_delay_s: f64) -> Result<()> {
+    use capsule_mpc_runtime::controller::{max_proven_gap_s, MAX_EXTRA_DELAY_S};
     if !(0.0..=MAX_EXTRA_DELAY_S).contains(&extra_delay_s) {
         bail!("extra delay {extra_delay_s} s is outside [0, {MAX_EXTRA_DELAY_S}] s");
     }
+    let tracking_s = config.scanner.tracking_time_s;
+    let max_s = max_proven_gap_s(
+        tracking_s + config.scanner.extra_delay_s,
+        config.capsule_count(),
+    );
+    if tracking_s + extra_delay_s > max_s + capsule_mpc_runtime::controller::TIME_TOLERANCE_S {
+        bail!("{}", gap_beyond_proven(tracking_s + extra_delay_s, max_s));
+    }
     Ok(())
+}
+
+/// What to say when tracking + delay is beyond the proven range.
+fn gap_beyond_proven(gap_s: f64, max_s: f64) -> String {
+    format!(
+        "tracking time + extra delay = {gap_s:.4} s is beyond the range this controller is proven to settle with \
+         ({max_s} s: the generated config's tracking time + delay + {} s for two capsules); regenerate with the \
+         longer scanner.tracking_time_s or extra_delay_s",
+        capsule_mpc_runtime::controller::PROVEN_EXTRA_GAP_S
+    )
 }
 
 /// Runs the closed loop and returns the full report.
 pub fn run(config: &Config, opts: &RunOptions) -> Result<RunReport> {
     use capsule_mpc_runtime::generated::{controller, paper_preset, three_capsules};
     check_duration(opts.duration_s)?;
-    check_extra_delay(opts.extra_delay_s)?;
+    check_extra_delay(config, opts.extra_delay_s)?;
     let module = compiled_controller_for(config)?;
     match (opts.preset, module) {
         (Preset::Default, ControllerModule::Controller) => {
@@ -319,6 +337,9 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
             "refine = none needs the explicit tier's data, which only the default two-capsule controller has \
              (not the paper preset, which has no tables, nor the three-capsule module): use refine once or per-sample"
         ),
+        RuntimeError::GapBeyondProven { gap_s, max_s } => {
+            anyhow::anyhow!("{}", gap_beyond_proven(gap_s, max_s))
+        }
         e => anyhow::anyhow!("controller settings: {e:?}"),
     })?;
     set_target_or_explain(&mut ctl, &target, "target")?;

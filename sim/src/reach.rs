@@ -180,7 +180,7 @@ pub fn reach_map(
     // A bad duration would refuse every target: say so once.
     crate::closed_loop::check_duration(duration_s)?;
     if let Some(d) = opts.extra_delay_s {
-        crate::closed_loop::check_extra_delay(d)?;
+        crate::closed_loop::check_extra_delay(config, d)?;
     }
     let points = targets
         .par_iter()

@@ -66,9 +66,14 @@ pub enum RuntimeError {
     /// A setting is out of its range; names it.
     BadSetting(&'static str),
     /// A time stamp is implausible: before the previous actuation ended
-    /// (time going backwards), an actuation start before its measurement,
-    /// or a gap above `MAX_CYCLE_GAP_S`; names the argument.
+    /// (time going backwards) or an actuation start before its
+    /// measurement; names the argument.
     BadTime(&'static str),
+    /// Tracking + delay (a setting's, or a cycle's gap between actuation
+    /// phases) longer than the range the loop is proven to settle with,
+    /// `max_s` ([`max_proven_gap_s`](super::max_proven_gap_s)): regenerate
+    /// the tables for the longer tracking phase, or, after a pause, `reset`.
+    GapBeyondProven { gap_s: f64, max_s: f64 },
     /// A target speed is not zero: the plans bring the capsules to rest.
     TargetNotAtRest,
     /// The solver's table file failed its integrity check (SHA-256

@@ -22,12 +22,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// `GAP_SMOOTHING`), so tracking phases of any length, fixed or
     /// varying, are handled.
     ///
-    /// Refused with `BadTime` naming the argument, changing nothing: a
+    /// Refused, changing nothing: with `BadTime` naming the argument, a
     /// measurement before the previous actuation ended (more than
-    /// `TIME_TOLERANCE_S`: time going backwards), an actuation start before
-    /// the measurement, or more than `MAX_CYCLE_GAP_S` from the previous
-    /// actuation end (or from the measurement, on the first timed cycle) to
-    /// the actuation start. After a longer pause, `reset`.
+    /// `TIME_TOLERANCE_S`: time going backwards) or an actuation start
+    /// before the measurement; with `GapBeyondProven`, more than
+    /// [`max_gap_s`](Self::max_gap_s) (+ `TIME_TOLERANCE_S`) from the
+    /// previous actuation end (or from the measurement, on the first timed
+    /// cycle) to the actuation start. After a longer pause, `reset`.
     pub fn cycle_at(
         &mut self,
         measured_positions_m: Option<&[f64]>,
@@ -49,8 +50,18 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.est.actuation_end_s
     }
 
+    /// The longest tracking + delay per cycle this controller accepts, s:
+    /// the proven range ([`max_proven_gap_s`] of the generated gap).
+    pub const MAX_GAP_S: f64 = max_proven_gap_s(S::TRACKING_TIME_S + S::EXTRA_DELAY_S, NX / 2);
+
+    /// [`MAX_GAP_S`](Self::MAX_GAP_S), s.
+    pub fn max_gap_s(&self) -> f64 {
+        Self::MAX_GAP_S
+    }
+
     /// Checks a measurement time against the end of the previous actuation
-    /// phase: `BadTime("t_measured_s")` when it goes backwards, otherwise
+    /// phase: `BadTime("t_measured_s")` when it goes backwards,
+    /// `GapBeyondProven` beyond [`max_gap_s`](Self::max_gap_s), otherwise
     /// the zero-gradient time from the previous actuation end to it, s.
     pub fn check_measurement_time(&self, t_measured_s: f64) -> Result<f64, RuntimeError> {
         if !t_measured_s.is_finite() {
@@ -62,9 +73,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 if t_measured_s < end_s - TIME_TOLERANCE_S {
                     return Err(RuntimeError::BadTime("t_measured_s"));
                 }
-                if t_measured_s - end_s > MAX_CYCLE_GAP_S {
-                    return Err(RuntimeError::BadTime("t_measured_s"));
-                }
+                self.check_gap(t_measured_s - end_s)?;
                 Ok((t_measured_s - end_s).max(0.0))
             }
         }
@@ -82,10 +91,20 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             return Err(RuntimeError::NonFinite("t_actuation_start_s"));
         }
         let wait_s = t_actuation_start_s - t_measured_s;
-        if wait_s < 0.0 || before_s + wait_s > MAX_CYCLE_GAP_S {
+        if wait_s < 0.0 {
             return Err(RuntimeError::BadTime("t_actuation_start_s"));
         }
+        self.check_gap(before_s + wait_s)?;
         Ok((before_s, wait_s, before_s + wait_s))
+    }
+
+    /// `GapBeyondProven` when `gap_s` exceeds the proven range.
+    fn check_gap(&self, gap_s: f64) -> Result<(), RuntimeError> {
+        let max_s = Self::MAX_GAP_S;
+        if gap_s > max_s + TIME_TOLERANCE_S {
+            return Err(RuntimeError::GapBeyondProven { gap_s, max_s });
+        }
+        Ok(())
     }
 
     /// The cycle after argument checks: predict `before_s` at zero gradient
