@@ -287,11 +287,15 @@ pub struct SimulateArgs {
     /// No terminal hold near the target: the MPC re-plans to the end.
     #[arg(long)]
     pub no_hold: bool,
-    /// Minimum-time shots (experimental law, off by default): the plan is
-    /// the shortest one that ends at the target at rest, re-solved every
-    /// cycle (scanner cycle: while a capsule is beyond 3 mm of its target).
-    #[arg(long)]
+    /// Minimum-time shots: the plan is the shortest one that ends at the
+    /// target at rest, re-solved every cycle (scanner cycle: while a
+    /// capsule is beyond 3 mm of its target). Default: on for three or more
+    /// capsules, off for two (experimental there).
+    #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,
+    /// No minimum-time shots (the refinement of the stored plans alone).
+    #[arg(long)]
+    pub no_shooting: bool,
     /// When the SQP refinement runs after the explicit tier (default: the
     /// config's `controller.refine`, itself `per-sample` by default).
     #[arg(long, value_enum)]
@@ -378,10 +382,13 @@ pub struct ReachArgs {
     /// (one for all or one per capsule).
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub plant_gain_scale: Option<Vec<f64>>,
-    /// Minimum-time shots (experimental law, off by default; see
-    /// `simulate --shooting`).
-    #[arg(long)]
+    /// Minimum-time shots (see `simulate --shooting`; default: on for
+    /// three or more capsules, off for two).
+    #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,
+    /// No minimum-time shots.
+    #[arg(long)]
+    pub no_shooting: bool,
     /// Simulated time per run, s (default: long enough for the grid).
     #[arg(long, value_parser = positive_seconds)]
     pub duration: Option<f64>,
@@ -472,6 +479,16 @@ pub struct FiguresArgs {
     /// Simulated time per run, s.
     #[arg(long, default_value_t = 3.0, value_parser = positive_seconds)]
     pub duration: f64,
+}
+
+/// `--shooting` / `--no-shooting` (clap refuses both): None leaves the
+/// controller's default.
+pub fn shooting_choice(shooting: bool, no_shooting: bool) -> Option<bool> {
+    match (shooting, no_shooting) {
+        (true, _) => Some(true),
+        (_, true) => Some(false),
+        _ => None,
+    }
 }
 
 /// `--extra-delay` is a delay after each tracking phase: ideal sampling has

@@ -26,7 +26,7 @@ fn reach(range_m: f64, step_m: f64, start_m: Vec<f64>) -> (Vec<ReachPoint>, Reac
         duration_s: None,
         extra_delay_s: None,
         mismatch: Default::default(),
-        shooting: false,
+        shooting: None,
     };
     let points = reach_map(&config, &opts, &|| {}).unwrap();
     let summary = ReachSummary::of(&points);

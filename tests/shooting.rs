@@ -22,7 +22,7 @@ fn ratios(step_m: f64, range_m: f64, shooting: bool) -> Vec<f64> {
             let target = [i as f64 * step_m, 0.0, j as f64 * step_m, 0.0];
             let mut opts = RunOptions::new(&config, target.to_vec(), Sampling::Ideal);
             opts.duration_s = 3.0;
-            opts.shooting = shooting;
+            opts.shooting = Some(shooting);
             let m = run(&config, &opts).unwrap().metrics;
             out.push(m.settle_over_bound.unwrap_or(f64::INFINITY));
         }

@@ -221,7 +221,7 @@ fn reach_json(
         duration_s: None,
         extra_delay_s: None,
         mismatch: PlantMismatch::default(),
-        shooting: false,
+        shooting: None,
     };
     let cfg = config.inner.clone();
     let points = py

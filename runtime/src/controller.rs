@@ -68,7 +68,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             glitch_frames: GLITCH_FRAMES,
             model_gain_uncertainty: MODEL_GAIN_UNCERTAINTY,
             model_drag_uncertainty: MODEL_DRAG_UNCERTAINTY,
-            shooting: false,
+            shooting: NX / 2 >= SHOOTING_BY_DEFAULT_FROM_CAPSULES,
         }
     }
 
@@ -338,6 +338,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// or re-shoot it from `e`.
     fn solve_step(&mut self, e: &[f64; NX]) -> SolveReport {
         self.solver.shift(self.law.applied_samples);
+        self.solver.start_cycle();
         self.solver.set_shooting(self.shooting_wanted(e));
         if self.solver.shot_samples() == 0 && self.creeping(e) {
             // Nearly at rest and still away from the target: the stored

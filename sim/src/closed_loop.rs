@@ -119,8 +119,9 @@ pub struct RunOptions {
     /// Terminal hold near the target (off: the MPC re-plans to the end,
     /// as the paper's controller does).
     pub hold: bool,
-    /// Minimum-time shots (`ControllerSettings::shooting`; off by default).
-    pub shooting: bool,
+    /// Minimum-time shots (`ControllerSettings::shooting`); None: the
+    /// controller's default (on from three capsules).
+    pub shooting: Option<bool>,
     /// When the SQP refinement runs after the explicit tier (the config's
     /// `controller.refine` by default).
     pub refine: RefineMode,
@@ -146,7 +147,7 @@ impl RunOptions {
             lose_every: None,
             preset: Preset::Default,
             hold: true,
-            shooting: false,
+            shooting: None,
             refine: config.controller.refine,
             mismatch: PlantMismatch::default(),
         }
@@ -325,7 +326,9 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     settings.extra_delay_s = opts.extra_delay_s;
     settings.position_noise_m = opts.position_noise_m;
     settings.disturbance_bound = opts.disturbance.bound_si();
-    settings.shooting = opts.shooting;
+    if let Some(on) = opts.shooting {
+        settings.shooting = on;
+    }
     if !opts.hold || opts.preset == Preset::Paper {
         // Zero-size entry set: the hold is never entered.
         settings.hold_enter_position_m = 0.0;

@@ -42,8 +42,9 @@ pub struct ReachOptions {
     pub extra_delay_s: Option<f64>,
     /// How the simulated capsules differ from the model (none by default).
     pub mismatch: crate::mismatch::PlantMismatch,
-    /// Minimum-time shots (`RunOptions::shooting`; off by default).
-    pub shooting: bool,
+    /// Minimum-time shots (`RunOptions::shooting`; None: the controller's
+    /// default).
+    pub shooting: Option<bool>,
 }
 
 /// Simulated time per run when none is given: 3 s plus 0.5 s per cm of the

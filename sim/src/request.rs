@@ -30,8 +30,9 @@ pub struct SimulateRequest {
     pub compensate_delay: bool,
     pub lose_every: Option<usize>,
     pub hold: bool,
-    /// Minimum-time shots (off by default).
-    pub shooting: bool,
+    /// Minimum-time shots; None: the controller's default (on from three
+    /// capsules).
+    pub shooting: Option<bool>,
     /// None: the config's `controller.refine`.
     pub refine: Option<RefineMode>,
     /// None: the config's extra delay (refused with ideal sampling).
@@ -57,7 +58,7 @@ impl SimulateRequest {
             compensate_delay: true,
             lose_every: None,
             hold: true,
-            shooting: false,
+            shooting: None,
             refine: None,
             extra_delay_s: None,
             mismatch: PlantMismatch::default(),

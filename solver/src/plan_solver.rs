@@ -80,6 +80,9 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     fn shot_samples(&self) -> usize;
     /// Whether `solve` looks for minimum-time shots (see `shooting`).
     fn set_shooting(&mut self, on: bool);
+    /// Starts a control cycle: restores the per-cycle compute budget of
+    /// the solves that follow (the shooting's).
+    fn start_cycle(&mut self);
     /// Whether a start at rest at relative positions `e` is covered.
     fn covers_from_rest(e: &[f64; NX]) -> bool;
     /// The first leg from rest at displacement `d = x_start - x_target`
@@ -178,6 +181,9 @@ impl<
     }
     fn set_shooting(&mut self, on: bool) {
         Solver::set_shooting(self, on)
+    }
+    fn start_cycle(&mut self) {
+        Solver::start_cycle(self)
     }
     fn adopt_explicit(&mut self) {
         Solver::adopt_explicit(self)

@@ -246,6 +246,12 @@ impl<
         &self.explicit_plan
     }
 
+    /// Starts a control cycle: the shooting's compute budget is restored
+    /// (every solve until the next call shares it).
+    pub fn start_cycle(&mut self) {
+        self.shooter.start_budget();
+    }
+
     /// Whether `solve` looks for minimum-time shots; off drops the shot.
     pub fn set_shooting(&mut self, on: bool) {
         self.shooting = on;
@@ -301,7 +307,6 @@ impl<
     /// Refines the plan from relative state `e = x - x_target`.
     pub fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
         let shooting = self.shooting;
-        self.shooter.start_budget();
         if shooting && self.has_plan && self.shot_samples > 0 {
             if let Some(report) = self.reshoot(e) {
                 return report;

@@ -35,7 +35,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         duration_s: args.duration,
         extra_delay_s: crate::cli::extra_delay_for(args.sampling, args.extra_delay)?,
         mismatch: crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale),
-        shooting: args.shooting,
+        shooting: crate::cli::shooting_choice(args.shooting, args.no_shooting),
     };
     opts.mismatch.factors(config.capsule_count())?;
     let targets = capsule_mpc_sim::reach::grid_targets(

@@ -35,7 +35,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     request.compensate_delay = !args.no_delay_compensation;
     request.lose_every = args.lose_every;
     request.hold = !args.no_hold;
-    request.shooting = args.shooting;
+    request.shooting = crate::cli::shooting_choice(args.shooting, args.no_shooting);
     request.mismatch = crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale);
     request.refine = args.refine.map(Into::into);
     request.extra_delay_s = crate::cli::extra_delay_for(args.sampling, args.extra_delay)?;
