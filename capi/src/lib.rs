@@ -591,6 +591,23 @@ pub unsafe extern "C" fn capsule_mpc_set_refine(handle: *mut CapsuleMpc, mode: i
     code(r)
 }
 
+/// Minimum-time shots (`on != 0`) or the refinement of the stored plans
+/// alone (`on == 0`, the default for this two-capsule build): an
+/// experimental law, see docs/decisions.md. Allowed at any time.
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_set_shooting(handle: *mut CapsuleMpc, on: i32) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; workspace checks the handle.
+        let ws = unsafe { workspace(handle) }?;
+        ws.controller.set_shooting(on != 0);
+        Ok(())
+    })();
+    code(r)
+}
+
 /// Which tier produced the last cycle's plan (`CAPSULE_MPC_TIER_*`;
 /// `_NONE` when it solved nothing: before any cycle, no target, the
 /// terminal hold or the fallback).

@@ -200,6 +200,7 @@ fn every_handle_fn_returns(h: *mut CapsuleMpc, expected: i32) {
             "set_sampling"
         );
         assert_eq!(capsule_mpc_set_timing(h, 0.02, 0.0), expected, "set_timing");
+        assert_eq!(capsule_mpc_set_shooting(h, 1), expected, "set_shooting");
         assert_eq!(
             capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
             expected,

@@ -179,6 +179,7 @@ def simulate(
     refine: Optional[str] = None,
     plant_drag_scale=None,
     plant_gain_scale=None,
+    shooting: Optional[bool] = None,
 ) -> Run:
     """One closed-loop run in the plant simulator, from rest at ``start``
     (positions, m; the origin when None) to ``target`` (M positions in m,
@@ -186,7 +187,9 @@ def simulate(
     or 'variable'; ``disturbance``: 'none', 'paper' or 'stress';
     ``disturbance_model``: 'random', 'drift' or 'constant'; ``refine``:
     None (the config's), 'none', 'once' or 'per-sample'; the plant's drag
-    and gain as factors of the model's (one for all or one per capsule).
+    and gain as factors of the model's (one for all or one per capsule);
+    ``shooting``: minimum-time shots on or off (None: the controller's
+    default, on from three capsules).
     Releases the GIL while it runs. ``ValueError`` names a bad argument."""
     cfg = _config(config)
     scale = lambda s: None if s is None else [float(v) for v in np.atleast_1d(s)]
@@ -202,6 +205,7 @@ def simulate(
         refine,
         scale(plant_drag_scale),
         scale(plant_gain_scale),
+        None if shooting is None else bool(shooting),
     )
     return Run(text)
 
@@ -257,12 +261,22 @@ def reach(
     sampling: str = "ideal",
     disturbance: str = "none",
     seed: int = 1,
+    shooting: Optional[bool] = None,
 ) -> ReachMap:
     """The closed loop from rest at the origin to every target of the grid
     (``range_cm`` half-width, ``step_cm`` spacing, per capsule) on both
-    cores; releases the GIL and prints nothing."""
+    cores; releases the GIL and prints nothing. ``shooting`` as for
+    ``simulate``."""
     cfg = _config(config)
-    text = _native.reach_json(cfg._native, float(range_cm), float(step_cm), sampling, disturbance, int(seed))
+    text = _native.reach_json(
+        cfg._native,
+        float(range_cm),
+        float(step_cm),
+        sampling,
+        disturbance,
+        int(seed),
+        None if shooting is None else bool(shooting),
+    )
     half = int(np.floor(range_cm / step_cm + 1e-9))
     return ReachMap(text, np.arange(-half, half + 1) * float(step_cm))
 

@@ -61,6 +61,7 @@ def simulate(
     refine: Optional[str] = ...,
     plant_drag_scale: Optional[object] = ...,
     plant_gain_scale: Optional[object] = ...,
+    shooting: Optional[bool] = ...,
 ) -> Run: ...
 
 class ReachMap:
@@ -86,6 +87,7 @@ def reach(
     sampling: str = ...,
     disturbance: str = ...,
     seed: int = ...,
+    shooting: Optional[bool] = ...,
 ) -> ReachMap: ...
 
 class Calibration:

@@ -157,7 +157,7 @@ fn mismatch_of(drag: Option<Vec<f64>>, gain: Option<Vec<f64>>) -> PlantMismatch 
 /// One closed-loop run: the CLI's `simulate --json` report as a string.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale))]
+#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale, shooting))]
 fn simulate_json(
     py: Python<'_>,
     config: &PyConfig,
@@ -171,8 +171,10 @@ fn simulate_json(
     refine: Option<&str>,
     plant_drag_scale: Option<Vec<f64>>,
     plant_gain_scale: Option<Vec<f64>>,
+    shooting: Option<bool>,
 ) -> PyResult<String> {
     let mut r = SimulateRequest::new(target, "custom");
+    r.shooting = shooting;
     r.start_m = start.unwrap_or_default();
     r.sampling = sampling_of(sampling)?;
     r.disturbance = DisturbanceLevel::from_name(disturbance).map_err(value_error)?;
@@ -190,7 +192,8 @@ fn simulate_json(
 
 /// The reach map: `{"points": [...], "summary": {...}}` as the CLI's JSON.
 #[pyfunction]
-#[pyo3(signature = (config, range_cm, step_cm, sampling, disturbance, seed))]
+#[pyo3(signature = (config, range_cm, step_cm, sampling, disturbance, seed, shooting))]
+#[allow(clippy::too_many_arguments)]
 fn reach_json(
     py: Python<'_>,
     config: &PyConfig,
@@ -199,6 +202,7 @@ fn reach_json(
     sampling: &str,
     disturbance: &str,
     seed: u64,
+    shooting: Option<bool>,
 ) -> PyResult<String> {
     if !(range_cm.is_finite() && range_cm >= 0.0) {
         return Err(value_error(format!(
@@ -221,7 +225,7 @@ fn reach_json(
         duration_s: None,
         extra_delay_s: None,
         mismatch: PlantMismatch::default(),
-        shooting: None,
+        shooting,
     };
     let cfg = config.inner.clone();
     let points = py

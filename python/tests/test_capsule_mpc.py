@@ -142,6 +142,17 @@ def test_reach_map_grids():
     assert "24 targets" in m.summary_line()
 
 
+def test_shooting_is_a_choice_for_two_capsules():
+    # Off by default for two capsules: the same run as asked off.
+    default = cm.simulate([0.02, -0.01], sampling="ideal", duration_s=2.0)
+    off = cm.simulate([0.02, -0.01], sampling="ideal", duration_s=2.0, shooting=False)
+    on = cm.simulate([0.02, -0.01], sampling="ideal", duration_s=2.0, shooting=True)
+    assert np.array_equal(default.u, off.u) and default.settle_time_s == off.settle_time_s
+    assert on.settle_time_s is not None and on.settle_time_s <= 1.1 * off.settle_time_s
+    m = cm.reach(range_cm=1.0, step_cm=1.0, shooting=True)
+    assert m.summary["never_settled"] == 0 and np.nanmax(m.ratio) < 1.3
+
+
 def _plant_step(x, u, b, g, h):
     """One RK4 step of the capsules (drag -b v|v|, gain g), for a Python plant."""
     def f(s):

@@ -173,6 +173,15 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         Ok(())
     }
 
+    /// Turns the minimum-time shots on or off (`ControllerSettings::shooting`);
+    /// any time: off drops a shot in flight, the next cycle refines instead.
+    pub fn set_shooting(&mut self, on: bool) {
+        self.settings.shooting = on;
+        if !on {
+            self.solver.set_shooting(false);
+        }
+    }
+
     /// The final target, when set.
     pub fn target(&self) -> Option<&[f64; NX]> {
         self.sup.has_target.then_some(&self.sup.final_target)
