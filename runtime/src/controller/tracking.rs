@@ -26,7 +26,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// measurement before the previous actuation ended (more than
     /// `TIME_TOLERANCE_S`: time going backwards) or an actuation start
     /// before the measurement; with `GapBeyondProven`, more than
-    /// [`max_gap_s`](Self::max_gap_s) (+ `TIME_TOLERANCE_S`) from the
+    /// [`MAX_GAP_S`](Self::MAX_GAP_S) (+ `TIME_TOLERANCE_S`) from the
     /// previous actuation end (or from the measurement, on the first timed
     /// cycle) to the actuation start. After a longer pause, `reset`.
     pub fn cycle_at(
@@ -54,14 +54,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// the proven range ([`max_proven_gap_s`] of the generated gap).
     pub const MAX_GAP_S: f64 = max_proven_gap_s(S::TRACKING_TIME_S + S::EXTRA_DELAY_S, NX / 2);
 
-    /// [`MAX_GAP_S`](Self::MAX_GAP_S), s.
-    pub fn max_gap_s(&self) -> f64 {
-        Self::MAX_GAP_S
-    }
-
     /// Checks a measurement time against the end of the previous actuation
     /// phase: `BadTime("t_measured_s")` when it goes backwards,
-    /// `GapBeyondProven` beyond [`max_gap_s`](Self::max_gap_s), otherwise
+    /// `GapBeyondProven` beyond [`MAX_GAP_S`](Self::MAX_GAP_S), otherwise
     /// the zero-gradient time from the previous actuation end to it, s.
     pub fn check_measurement_time(&self, t_measured_s: f64) -> Result<f64, RuntimeError> {
         if !t_measured_s.is_finite() {
