@@ -68,7 +68,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             glitch_frames: GLITCH_FRAMES,
             model_gain_uncertainty: MODEL_GAIN_UNCERTAINTY,
             model_drag_uncertainty: MODEL_DRAG_UNCERTAINTY,
-            shooting: NX / 2 >= SHOOTING_BY_DEFAULT_FROM_CAPSULES,
+            shooting: Shooting::Auto,
         }
     }
 
@@ -121,6 +121,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.est.confirmed_frames = 0;
         // A new start: the host's clock restarts too.
         self.est.actuation_end_s = None;
+        self.est.full_state_gradient = None;
         self.restart_plan();
         self.sup.forget_mode();
         Ok(())
@@ -176,7 +177,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// Turns the minimum-time shots on or off (`ControllerSettings::shooting`);
     /// any time: off drops a shot in flight, the next cycle refines instead.
     pub fn set_shooting(&mut self, on: bool) {
-        self.settings.shooting = on;
+        self.settings.shooting = on.into();
         if !on {
             self.solver.set_shooting(false);
         }
@@ -264,9 +265,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             libm::fabs(x[2 * i]) <= MAX_ABS_POSITION_M
                 && libm::fabs(x[2 * i + 1]) <= MAX_ABS_SPEED_M_PER_S
         });
+        let played = self.est.full_state_gradient.take();
         if !physical {
             let kept = self.estimate();
             return Ok(self.plan_from(&kept, RuntimeStatus::MeasurementRejected, 1));
+        }
+        if let Some(u) = played {
+            self.learn_from_full_state(x, u);
         }
         for i in 0..NX / 2 {
             self.est.filters[i].mean = [x[2 * i], x[2 * i + 1]];
@@ -275,7 +280,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.est.candidate_frames = 0;
         self.est.has_replaced = false;
         self.est.confirmed_frames = self.est.confirmed_frames.saturating_add(1);
-        Ok(self.plan_from(x, RuntimeStatus::Ok, 1))
+        let out = self.plan_from(x, RuntimeStatus::Ok, 1);
+        self.est.full_state_gradient = Some(out.gradients_t_per_m[0]);
+        Ok(out)
     }
 
     /// One scanner cycle with the configured timing: the frame
@@ -366,7 +373,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// error) played through tracking gaps on an estimate arrives with a
     /// relative speed the hold cannot remove (measured, docs/decisions.md).
     fn shooting_wanted(&self, e: &[f64; NX]) -> bool {
-        self.settings.shooting
+        self.settings.shooting.is_on(self.settings.sampling, NX / 2)
             && (self.settings.sampling == Sampling::Ideal
                 || (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > SHOT_SCANNER_BEYOND_M))
     }

@@ -170,20 +170,53 @@ impl ScaleEstimate {
     /// mean times the sensitivity: the correction (dx, dv) the kinematic
     /// estimate owes to it.
     pub fn update(&mut self, innovation_m: f64, s_m2: f64, used: [f64; 2]) -> [f64; 2] {
-        let h = [self.sens[0], self.sens[1]];
-        let p = self.cov;
-        let ph = [p[0] * h[0] + p[1] * h[1], p[2] * h[0] + p[3] * h[1]];
         // Each frame counts as if measured to SCALE_FRAME_STD_M at best:
         // the factors are learned over a move's many frames, so a few
         // frames of a tracking glitch cannot set them.
-        let s = s_m2 + SCALE_FRAME_STD_M * SCALE_FRAME_STD_M + h[0] * ph[0] + h[1] * ph[1];
+        let h = [self.sens[0], self.sens[1]];
+        let d = self.regress(
+            h,
+            innovation_m,
+            s_m2 + SCALE_FRAME_STD_M * SCALE_FRAME_STD_M,
+            used,
+        );
+        [
+            self.sens[0] * d[0] + self.sens[1] * d[1],
+            self.sens[2] * d[0] + self.sens[3] * d[1],
+        ]
+    }
+
+    /// Update from a full state (ideal sampling): `speed_innovation` is the
+    /// speed measured minus the one predicted with factors `used` over one
+    /// step whose sensitivity to the factors is `sens` (set by `predict`
+    /// from zero), of variance `var` ((m/s)^2: what the disturbance adds
+    /// over the step). The position adds nothing a step's speed does not.
+    pub fn update_from_speed(&mut self, speed_innovation: f64, var: f64, used: [f64; 2]) {
+        let h = [self.sens[2], self.sens[3]];
+        self.regress(h, speed_innovation, var, used);
+    }
+
+    /// The scalar regression of `innovation` = h . (factors - used) + noise
+    /// of variance `noise_var` (the factors' part added here); returns the
+    /// change of the factors' mean. Innovations the factors' uncertainty
+    /// does not explain (`SCALE_UPDATE_NIS`) change nothing.
+    fn regress(
+        &mut self,
+        h: [f64; 2],
+        innovation: f64,
+        noise_var: f64,
+        used: [f64; 2],
+    ) -> [f64; 2] {
+        let p = self.cov;
+        let ph = [p[0] * h[0] + p[1] * h[1], p[2] * h[0] + p[3] * h[1]];
+        let s = noise_var + h[0] * ph[0] + h[1] * ph[1];
         if s.is_nan() || s <= 0.0 {
             return [0.0, 0.0];
         }
         // The prediction used `used`, not the mean: what the mean predicts
         // on top of it is part of the expected innovation.
         let expected = h[0] * (self.mean[0] - used[0]) + h[1] * (self.mean[1] - used[1]);
-        let r = innovation_m - expected;
+        let r = innovation - expected;
         if r * r / s > SCALE_UPDATE_NIS {
             // Farther than the factors' own uncertainty explains: a
             // tracking glitch or a disturbance, not the capsule's constants.
@@ -202,10 +235,7 @@ impl ScaleEstimate {
         let off = 0.5 * (self.cov[1] + self.cov[2]);
         self.cov[1] = off;
         self.cov[2] = off;
-        [
-            self.sens[0] * d[0] + self.sens[1] * d[1],
-            self.sens[2] * d[0] + self.sens[3] * d[1],
-        ]
+        d
     }
 
     /// The kinematic update with gains `k` (position, speed) took part of

@@ -14,7 +14,7 @@ use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
 use capsule_mpc_generator::generate::ControllerModule;
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_generator::tables::{hex, solver_hash};
-use capsule_mpc_runtime::controller::{Refine, SwitchingRule};
+use capsule_mpc_runtime::controller::{Refine, Shooting, SwitchingRule};
 use capsule_mpc_runtime::generated::{PlanSolver, Tier};
 use capsule_mpc_runtime::{Controller, RuntimeError, RuntimeStatus};
 use std::time::Instant;
@@ -326,9 +326,12 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     settings.extra_delay_s = opts.extra_delay_s;
     settings.position_noise_m = opts.position_noise_m;
     settings.disturbance_bound = opts.disturbance.bound_si();
-    if let Some(on) = opts.shooting {
-        settings.shooting = on;
-    }
+    settings.shooting = match (opts.shooting, opts.preset) {
+        (Some(on), _) => on.into(),
+        // The paper's NMPC plans on its quadratic cost alone.
+        (None, Preset::Paper) => Shooting::Off,
+        (None, Preset::Default) => settings.shooting,
+    };
     if !opts.hold || opts.preset == Preset::Paper {
         // Zero-size entry set: the hold is never entered.
         settings.hold_enter_position_m = 0.0;

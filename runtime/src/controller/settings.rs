@@ -40,6 +40,44 @@ pub enum Refine {
     PerSample,
 }
 
+/// When the solver looks for minimum-time shots
+/// (`capsule_mpc_solver::shooting`): the plan is the shortest one that
+/// ends at the target at rest, re-solved every cycle, wherever one
+/// converges (under the scanner cycle only beyond `SHOT_SCANNER_BEYOND_M`).
+/// Without them, the refinement of the stored plans alone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shooting {
+    Off,
+    On,
+    /// On under ideal sampling (the factors are learned from the full
+    /// state there, so the shots aim on the plant) and under the scanner
+    /// cycle from `SHOOTING_BY_DEFAULT_FROM_CAPSULES` capsules.
+    Auto,
+}
+
+impl Shooting {
+    /// Whether shots are on for `capsules` capsules under `sampling`.
+    pub fn is_on(self, sampling: Sampling, capsules: usize) -> bool {
+        match self {
+            Shooting::Off => false,
+            Shooting::On => true,
+            Shooting::Auto => {
+                sampling == Sampling::Ideal || capsules >= SHOOTING_BY_DEFAULT_FROM_CAPSULES
+            }
+        }
+    }
+}
+
+impl From<bool> for Shooting {
+    fn from(on: bool) -> Self {
+        if on {
+            Shooting::On
+        } else {
+            Shooting::Off
+        }
+    }
+}
+
 /// Settings; defaults come from the generated spec.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ControllerSettings {
@@ -102,12 +140,9 @@ pub struct ControllerSettings {
     /// the model exactly). Real capsules are known to 10-20 %.
     pub model_gain_uncertainty: f64,
     pub model_drag_uncertainty: f64,
-    /// Minimum-time shots (`capsule_mpc_solver::shooting`): the plan is
-    /// the shortest one that ends at the target at rest, re-solved every
-    /// cycle, wherever one converges (scanner cycle: beyond
-    /// `SHOT_SCANNER_BEYOND_M`); off, the refinement of the stored plans
-    /// alone. Default: on from `SHOOTING_BY_DEFAULT_FROM_CAPSULES` capsules.
-    pub shooting: bool,
+    /// Minimum-time shots (`capsule_mpc_solver::shooting`; default
+    /// `Shooting::Auto`).
+    pub shooting: Shooting,
 }
 impl ControllerSettings {
     /// Tracking phase + extra delay: the zero-gradient wait between a
@@ -224,16 +259,19 @@ pub const MODEL_DRIFT_MAX_M: f64 = 0.004;
 /// Step of the finite differences for the gain and drag factors'
 /// sensitivities.
 pub const SCALE_STEP: f64 = 1.0e-3;
+/// Ideal sampling: the speed of a full state counts as measured to this
+/// when it regresses the factors, m/s (one step's speed change is
+/// 1e-3 m/s for a 10 % gain error at full gradient).
+pub const FULL_STATE_SPEED_STD_M_PER_S: f64 = 1.0e-4;
 /// A factor is used once it differs from the model's 1 by this many
 /// standard deviations of its estimate (on the model itself, chance
 /// differences stay below it).
 pub const SCALE_SIGNIFICANCE: f64 = 3.0;
-/// From this many capsules on, minimum-time shots are on by default. Three
-/// capsules, ideal, 1 cm grid over +-3 cm: 0 of 342 unsettled against 15,
-/// settle / bound median 1.00 against 1.19; scanner cycle (1.5 cm grid,
-/// paper disturbance, seed 1) 1 / 15 unsettled against 11 / 34 (constant /
-/// variable). Two capsules keep them opt-in: their end game under the
-/// scanner cycle and off the model regresses (docs/decisions.md).
+/// From this many capsules on, minimum-time shots are on by default under
+/// the scanner cycle (`Shooting::Auto`). Three capsules, 1.5 cm grid,
+/// paper disturbance, seed 1: 1 / 15 unsettled against 11 / 34 (constant /
+/// variable). Two capsules keep them opt-in there: their end game under
+/// the scanner cycle regresses (docs/decisions.md).
 pub const SHOOTING_BY_DEFAULT_FROM_CAPSULES: usize = 3;
 /// Largest model uncertainty accepted (a factor of two).
 pub const MAX_MODEL_UNCERTAINTY: f64 = 1.0;

@@ -83,6 +83,9 @@ pub(super) struct Estimation<const NX: usize> {
     /// Running estimate of the zero-gradient gap between actuation phases
     /// (tracking + delay), s: the coast the plans model.
     pub gap_s: f64,
+    /// Ideal sampling: the gradient played since the last full state, T/m
+    /// (None before the first one, after `reset` and after a rejected one).
+    pub full_state_gradient: Option<f64>,
 }
 
 impl<const NX: usize> Estimation<NX> {
@@ -100,6 +103,7 @@ impl<const NX: usize> Estimation<NX> {
             confirmed_frames: 0,
             actuation_end_s: None,
             gap_s,
+            full_state_gradient: None,
         }
     }
 }

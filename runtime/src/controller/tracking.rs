@@ -307,6 +307,26 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
     }
 
+    /// Ideal sampling: the factors from the full state `x`, against the
+    /// model's step at gradient `u` from the previous full state (still
+    /// the filters' means). Each step's speed change regresses them; the
+    /// disturbance over the step is the noise.
+    pub(super) fn learn_from_full_state(&mut self, x: &[f64; NX], u: f64) {
+        let gamma = self.settings.disturbance_bound;
+        let var = sq(FULL_STATE_SPEED_STD_M_PER_S) + sq(gamma * S::DT_S);
+        for i in 0..NX / 2 {
+            let used = self.est.applied_scales[i];
+            let (next, a, b) =
+                factor_step::<S, NX, K>(i, self.est.filters[i].mean, u, S::DT_S, used);
+            let scale = &mut self.est.scales[i];
+            // The previous state was exact: the sensitivity is this step's.
+            scale.sens = [0.0; 4];
+            scale.predict(a, b, S::DT_S);
+            scale.update_from_speed(x[2 * i + 1] - next[1], var, used);
+        }
+        self.refresh_applied_scales();
+    }
+
     /// Takes up the factors that differ significantly from the model
     /// (`SCALE_SIGNIFICANCE` standard deviations): the estimate is moved
     /// by what the change of factors implies, and the refinement rolls
@@ -381,20 +401,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         };
         let m = NX / 2;
         self.accumulate_model_drift(u, duration_s);
-        // The factors' sensitivities, by differences of the same step.
         for (i, &s) in applied.iter().enumerate().take(m) {
-            let f = self.est.filters[i];
-            let (base, a) = S::capsule_transition_scaled(i, f.mean, u, duration_s, s);
-            let (g, _) =
-                S::capsule_transition_scaled(i, f.mean, u, duration_s, [s[0] + SCALE_STEP, s[1]]);
-            let (d, _) =
-                S::capsule_transition_scaled(i, f.mean, u, duration_s, [s[0], s[1] + SCALE_STEP]);
-            let b = [
-                (g[0] - base[0]) / SCALE_STEP,
-                (d[0] - base[0]) / SCALE_STEP,
-                (g[1] - base[1]) / SCALE_STEP,
-                (d[1] - base[1]) / SCALE_STEP,
-            ];
+            let (_, a, b) = factor_step::<S, NX, K>(i, self.est.filters[i].mean, u, duration_s, s);
             self.est.scales[i].predict(a, b, duration_s);
         }
         for (i, &scale) in applied.iter().enumerate().take(m) {
@@ -421,4 +429,29 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 .all(|f| f.position_std_m() <= REPLACED_TRACK_MAX_STD_M);
         }
     }
+}
+
+/// Capsule `i`'s model step from `mean` over `duration_s` at gradient `u`
+/// with factors `scale`: the next (x, v), its Jacobian in (x, v) and its
+/// sensitivity to the factors (row major; columns gain, drag), by
+/// differences of the same step.
+fn factor_step<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    i: usize,
+    mean: [f64; 2],
+    u: f64,
+    duration_s: f64,
+    scale: [f64; 2],
+) -> ([f64; 2], [f64; 4], [f64; 4]) {
+    let (base, a) = S::capsule_transition_scaled(i, mean, u, duration_s, scale);
+    let (g, _) =
+        S::capsule_transition_scaled(i, mean, u, duration_s, [scale[0] + SCALE_STEP, scale[1]]);
+    let (d, _) =
+        S::capsule_transition_scaled(i, mean, u, duration_s, [scale[0], scale[1] + SCALE_STEP]);
+    let b = [
+        (g[0] - base[0]) / SCALE_STEP,
+        (d[0] - base[0]) / SCALE_STEP,
+        (g[1] - base[1]) / SCALE_STEP,
+        (d[1] - base[1]) / SCALE_STEP,
+    ];
+    (base, a, b)
 }
