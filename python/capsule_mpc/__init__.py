@@ -133,9 +133,9 @@ class Run:
     strings ('track' or 'actuate'), ``measurements`` (list of dicts),
     ``metrics`` (the CLI's metrics, same keys and values), ``modes`` (the
     controller's mode timeline: dicts with ``t_s`` and ``mode``),
-    ``estimated_factors`` (scanner samplings: per capsule, the controller's
-    estimate of its gain and drag factors against the model, with standard
-    deviations; None under ideal sampling); ``to_json()`` is the CLI's
+    ``estimated_factors`` (per capsule, the controller's estimate of its
+    gain and drag factors against the model, with standard deviations);
+    ``to_json()`` is the CLI's
     JSON."""
 
     def __init__(self, text: str):

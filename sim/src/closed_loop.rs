@@ -492,18 +492,18 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     report.fallback_cycles = Some(statuses.fallback);
     if opts.sampling != Sampling::Ideal {
         report.frames = Some(statuses.frames);
-        report.estimated_factors = Some(
-            (0..NX / 2)
-                .filter_map(|i| ctl.model_factors(i))
-                .map(|f| FactorEstimate {
-                    gain: f.mean[0],
-                    gain_std: f.cov[0].max(0.0).sqrt(),
-                    drag: f.mean[1],
-                    drag_std: f.cov[3].max(0.0).sqrt(),
-                })
-                .collect(),
-        );
     }
+    report.estimated_factors = Some(
+        (0..NX / 2)
+            .filter_map(|i| ctl.model_factors(i))
+            .map(|f| FactorEstimate {
+                gain: f.mean[0],
+                gain_std: f.cov[0].max(0.0).sqrt(),
+                drag: f.mean[1],
+                drag_std: f.cov[3].max(0.0).sqrt(),
+            })
+            .collect(),
+    );
     report.tier_cycles = Some(TierCycles {
         explicit: statuses.explicit,
         refined: statuses.refined,

@@ -105,7 +105,7 @@ pub struct RunReport {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub modes: Option<Vec<ModeChange>>,
     /// The controller's estimate of each capsule's gain and drag factors
-    /// against the model at the end of the run (scanner-cycle samplings).
+    /// against the model at the end of the run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimated_factors: Option<Vec<FactorEstimate>>,
 }

@@ -83,6 +83,9 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// Starts a control cycle: restores the per-cycle compute budget of
     /// the solves that follow (the shooting's).
     fn start_cycle(&mut self);
+    /// A converged shot's terminal speed tolerance, m/s (see
+    /// `shooting::SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S`).
+    fn set_shot_speed_tolerance(&mut self, tolerance_m_per_s: f64);
     /// Whether a start at rest at relative positions `e` is covered.
     fn covers_from_rest(e: &[f64; NX]) -> bool;
     /// The first leg from rest at displacement `d = x_start - x_target`
@@ -184,6 +187,9 @@ impl<
     }
     fn start_cycle(&mut self) {
         Solver::start_cycle(self)
+    }
+    fn set_shot_speed_tolerance(&mut self, tolerance_m_per_s: f64) {
+        Solver::set_shot_speed_tolerance(self, tolerance_m_per_s)
     }
     fn adopt_explicit(&mut self) {
         Solver::adopt_explicit(self)

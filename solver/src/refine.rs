@@ -252,6 +252,11 @@ impl<
         self.shooter.start_budget();
     }
 
+    /// A converged shot's terminal speed tolerance, m/s.
+    pub fn set_shot_speed_tolerance(&mut self, tolerance_m_per_s: f64) {
+        self.shooter.set_speed_tolerance(tolerance_m_per_s);
+    }
+
     /// Whether `solve` looks for minimum-time shots; off drops the shot.
     pub fn set_shooting(&mut self, on: bool) {
         self.shooting = on;
