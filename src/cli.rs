@@ -289,8 +289,9 @@ pub struct SimulateArgs {
     pub no_hold: bool,
     /// Minimum-time shots: the plan is the shortest one that ends at the
     /// target at rest, re-solved every cycle (scanner cycle: while a
-    /// capsule is beyond 3 mm of its target). Default: on for three or more
-    /// capsules, off for two (experimental there).
+    /// capsule is beyond 3 mm of its target). Default: on under ideal
+    /// sampling and for three or more capsules, off for two under the
+    /// scanner cycle (experimental there).
     #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,
     /// No minimum-time shots (the refinement of the stored plans alone).
@@ -382,8 +383,8 @@ pub struct ReachArgs {
     /// (one for all or one per capsule).
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub plant_gain_scale: Option<Vec<f64>>,
-    /// Minimum-time shots (see `simulate --shooting`; default: on for
-    /// three or more capsules, off for two).
+    /// Minimum-time shots (see `simulate --shooting`; default: on under
+    /// ideal sampling and for three or more capsules).
     #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,
     /// No minimum-time shots.
