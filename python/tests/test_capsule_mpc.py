@@ -51,7 +51,8 @@ def test_config_from_str():
 def test_simulate_scenario_c_settles():
     run = cm.simulate([0.02, -0.01], sampling="ideal", disturbance="none")
     assert run.x.shape == (len(run.t), 4) and run.u.shape == run.t.shape
-    assert 0.7 < run.settle_time_s < 0.8
+    # Ideal sampling shoots by default: near the independent 0.68 s minimum.
+    assert 0.65 < run.settle_time_s < 0.72
     assert run.metrics["final_position_error_m"] < 1e-3
     assert set(run.phase) <= {"track", "actuate"}
 
@@ -146,12 +147,16 @@ def test_reach_map_grids():
 
 
 def test_shooting_is_a_choice_for_two_capsules():
-    # Off by default for two capsules: the same run as asked off.
+    # On by default under ideal sampling (the same run as asked on), faster
+    # than the refinement alone; off by default under the scanner cycle.
     default = cm.simulate([0.02, -0.01], sampling="ideal", duration_s=2.0)
     off = cm.simulate([0.02, -0.01], sampling="ideal", duration_s=2.0, shooting=False)
     on = cm.simulate([0.02, -0.01], sampling="ideal", duration_s=2.0, shooting=True)
-    assert np.array_equal(default.u, off.u) and default.settle_time_s == off.settle_time_s
-    assert on.settle_time_s is not None and on.settle_time_s <= 1.1 * off.settle_time_s
+    assert np.array_equal(default.u, on.u) and default.settle_time_s == on.settle_time_s
+    assert on.settle_time_s is not None and on.settle_time_s <= 0.95 * off.settle_time_s
+    scanner = cm.simulate([0.02, -0.01], sampling="constant", duration_s=2.0)
+    scanner_off = cm.simulate([0.02, -0.01], sampling="constant", duration_s=2.0, shooting=False)
+    assert np.array_equal(scanner.u, scanner_off.u)
     m = cm.reach(range_cm=1.0, step_cm=1.0, shooting=True)
     assert m.summary["never_settled"] == 0 and np.nanmax(m.ratio) < 1.3
 
