@@ -97,6 +97,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 station: StationKeeper::new(&capsule_drags::<S, NX, K>()),
             },
         };
+        // From an exact state a shot can aim tighter than from an estimate.
+        c.solver.set_shot_speed_tolerance(match settings.sampling {
+            Sampling::Ideal => SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S,
+            Sampling::Constant | Sampling::Variable => SHOT_SPEED_TOLERANCE_M_PER_S,
+        });
         c.reset(positions_m)?;
         Ok(c)
     }
@@ -150,11 +155,6 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             .settings
             .schedule_with_gap(self.law.planned_phase_samples, self.est.gap_s);
         self.solver.set_schedule(samples, coast_s);
-        self.solver
-            .set_shot_speed_tolerance(match self.settings.sampling {
-                Sampling::Ideal => SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S,
-                Sampling::Constant | Sampling::Variable => SHOT_SPEED_TOLERANCE_M_PER_S,
-            });
     }
 
     /// Whether the last cycle was in the terminal hold.
@@ -278,7 +278,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             let kept = self.estimate();
             return Ok(self.plan_from(&kept, RuntimeStatus::MeasurementRejected, 1));
         }
-        if let Some(u) = played {
+        // Only the shots plan on the learned factors to advantage: the
+        // refinement of the model's stored plans on them left more targets
+        // unsettled (docs/decisions.md), so without shots the model stays.
+        if let (Some(u), true) = (played, self.shots_on()) {
             self.learn_from_full_state(x, u);
         }
         for i in 0..NX / 2 {
@@ -381,9 +384,16 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// error) played through tracking gaps on an estimate arrives with a
     /// relative speed the hold cannot remove (measured, docs/decisions.md).
     fn shooting_wanted(&self, e: &[f64; NX]) -> bool {
-        self.settings.shooting.is_on(self.settings.sampling, NX / 2)
+        self.shots_on()
             && (self.settings.sampling == Sampling::Ideal
                 || (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > SHOT_SCANNER_BEYOND_M))
+    }
+
+    /// Whether these settings shoot at all (`Shooting::is_on`; the
+    /// explicit tier alone never does).
+    fn shots_on(&self) -> bool {
+        let s = &self.settings;
+        s.shooting.is_on(s.sampling, NX / 2) && s.refine != Refine::None
     }
 
     /// `Fallback`: no plan. The next cycle looks the (braked) state up
@@ -550,7 +560,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // on to rest (off the model the hold, skipping the test, kept
         // 0.85 mm/s of relative speed for 0.3 s and left the band:
         // docs/decisions.md).
-        let shots = s.shooting.is_on(s.sampling, NX / 2) && s.refine != Refine::None;
+        let shots = self.shots_on();
         let can_stop = |spread_m: f64| {
             (s.sampling == Sampling::Ideal && !shots)
                 || self
