@@ -289,9 +289,8 @@ pub struct SimulateArgs {
     pub no_hold: bool,
     /// Minimum-time shots: the plan is the shortest one that ends at the
     /// target at rest, re-solved every cycle (scanner cycle: while a
-    /// capsule is beyond 3 mm of its target). Default: on under ideal
-    /// sampling and for three or more capsules, off for two under the
-    /// scanner cycle (experimental there).
+    /// capsule is beyond 3 mm of its target, and to the end of a shot in
+    /// flight). Default: on.
     #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,
     /// No minimum-time shots (the refinement of the stored plans alone).
@@ -383,8 +382,7 @@ pub struct ReachArgs {
     /// (one for all or one per capsule).
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub plant_gain_scale: Option<Vec<f64>>,
-    /// Minimum-time shots (see `simulate --shooting`; default: on under
-    /// ideal sampling and for three or more capsules).
+    /// Minimum-time shots (see `simulate --shooting`; default: on).
     #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,
     /// No minimum-time shots.

@@ -592,9 +592,8 @@ pub unsafe extern "C" fn capsule_mpc_set_refine(handle: *mut CapsuleMpc, mode: i
 }
 
 /// Minimum-time shots (`on != 0`) or the refinement of the stored plans
-/// alone (`on == 0`). Default (`Shooting::Auto`): on under ideal sampling,
-/// off under the scanner cycle for this two-capsule build, where the
-/// shots are experimental (docs/decisions.md). Allowed at any time.
+/// alone (`on == 0`). Default (`Shooting::Auto`): on (docs/decisions.md).
+/// Allowed at any time.
 ///
 /// # Safety
 /// `handle` as for `capsule_mpc_reset`.

@@ -189,7 +189,7 @@ def simulate(
     None (the config's), 'none', 'once' or 'per-sample'; the plant's drag
     and gain as factors of the model's (one for all or one per capsule);
     ``shooting``: minimum-time shots on or off (None: the controller's
-    default: on under ideal sampling and from three capsules).
+    default: on).
     Releases the GIL while it runs. ``ValueError`` names a bad argument."""
     cfg = _config(config)
     scale = lambda s: None if s is None else [float(v) for v in np.atleast_1d(s)]

@@ -147,16 +147,18 @@ def test_reach_map_grids():
 
 
 def test_shooting_is_a_choice_for_two_capsules():
-    # On by default under ideal sampling (the same run as asked on), faster
-    # than the refinement alone; off by default under the scanner cycle.
+    # On by default (the same run as asked on), faster than the refinement
+    # alone, under ideal sampling and under the scanner cycle.
     default = cm.simulate([0.02, -0.01], sampling="ideal", duration_s=2.0)
     off = cm.simulate([0.02, -0.01], sampling="ideal", duration_s=2.0, shooting=False)
     on = cm.simulate([0.02, -0.01], sampling="ideal", duration_s=2.0, shooting=True)
     assert np.array_equal(default.u, on.u) and default.settle_time_s == on.settle_time_s
     assert on.settle_time_s is not None and on.settle_time_s <= 0.95 * off.settle_time_s
     scanner = cm.simulate([0.02, -0.01], sampling="constant", duration_s=2.0)
+    scanner_on = cm.simulate([0.02, -0.01], sampling="constant", duration_s=2.0, shooting=True)
     scanner_off = cm.simulate([0.02, -0.01], sampling="constant", duration_s=2.0, shooting=False)
-    assert np.array_equal(scanner.u, scanner_off.u)
+    assert np.array_equal(scanner.u, scanner_on.u)
+    assert scanner.settle_time_s is not None and scanner.settle_time_s < scanner_off.settle_time_s
     m = cm.reach(range_cm=1.0, step_cm=1.0, shooting=True)
     assert m.summary["never_settled"] == 0 and np.nanmax(m.ratio) < 1.3
 

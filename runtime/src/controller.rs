@@ -7,13 +7,14 @@ use crate::switching::{
     PaperConstants, TightInputs,
 };
 use capsule_mpc_solver::shooting::{
-    SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S, SHOT_SPEED_TOLERANCE_M_PER_S,
+    SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S, SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S,
 };
 use capsule_mpc_solver::{PlanSolver, SolveReport, SolveStatus, Tier};
 
 mod braking;
 mod checks;
 mod fusion;
+mod hold;
 mod legs;
 mod mode;
 mod numeric;
@@ -97,10 +98,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 station: StationKeeper::new(&capsule_drags::<S, NX, K>()),
             },
         };
-        // From an exact state a shot can aim tighter than from an estimate.
+        // What the hold can stop after a shot depends on the sampling
+        // (see the constants).
         c.solver.set_shot_speed_tolerance(match settings.sampling {
             Sampling::Ideal => SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S,
-            Sampling::Constant | Sampling::Variable => SHOT_SPEED_TOLERANCE_M_PER_S,
+            Sampling::Constant | Sampling::Variable => SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S,
         });
         c.reset(positions_m)?;
         Ok(c)
@@ -155,6 +157,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             .settings
             .schedule_with_gap(self.law.planned_phase_samples, self.est.gap_s);
         self.solver.set_schedule(samples, coast_s);
+    }
+
+    /// Samples left of the minimum-time shot being flown (0: none).
+    pub fn shot_samples(&self) -> usize {
+        self.solver.shot_samples()
     }
 
     /// Whether the last cycle was in the terminal hold.
@@ -386,6 +393,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     fn shooting_wanted(&self, e: &[f64; NX]) -> bool {
         self.shots_on()
             && (self.settings.sampling == Sampling::Ideal
+                || self.solver.shot_samples() > 0
                 || (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > SHOT_SCANNER_BEYOND_M))
     }
 
@@ -430,13 +438,57 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         if measured > 0 && report.max_qp_iterations > measured && out.status == RuntimeStatus::Ok {
             out.status = RuntimeStatus::AboveIterationMap;
         }
+        self.skip_idle_start(x);
+        let mut n = self.phase_length(e, n_max);
+        if self.settings.sampling == Sampling::Variable {
+            if n > self.law.planned_phase_samples && self.settings.refine != Refine::None {
+                // The plan was solved for shorter phases (a coast after
+                // each): played back to back for n samples it would miss
+                // (seen: a 1 cm move whose shot, solved for 1-sample phases,
+                // played 6 samples through and arrived 2 mm and 14 mm/s
+                // off). Solve it again for phases of n samples; a shot that
+                // does not converge for them plays the phases it was
+                // solved for.
+                n = self.replan_for_phase(x, e, n, n_max);
+            }
+            // Model (and refine for) the next phase as long as this one:
+            // phase lengths change slowly, so the model stays close to what
+            // plays.
+            self.law.planned_phase_samples = n;
+            self.update_schedule();
+        }
+        for (o, &u) in out.gradients_t_per_m.iter_mut().zip(self.solver.plan()) {
+            // The solver keeps |u| <= u_max; clamp again as a last invariant.
+            *o = u.clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M);
+        }
+        out.actuation_samples = n;
+        self.law.applied_samples = n;
+        self.law.last_cost = report.cost;
+    }
+
+    /// The plan re-solved for phases of `n` samples (see `play_step`);
+    /// returns the phase length to play.
+    fn replan_for_phase(&mut self, x: &[f64; NX], e: &[f64; NX], n: usize, n_max: usize) -> usize {
+        let (samples, coast_s) = self.settings.schedule_with_gap(n, self.est.gap_s);
+        self.law.planned_phase_samples = n;
+        if !self.solver.reschedule_shot(e, samples, coast_s) {
+            self.update_schedule();
+            if self.solver.solve(e).status == SolveStatus::OutOfRange {
+                return n;
+            }
+        }
+        self.skip_idle_start(x);
+        n.min(self.phase_length(e, n_max))
+    }
+
+    /// At rest an idle sample (and the coast after it) leaves the state as
+    /// it is: a plan that starts idle only waits, and re-planned from the
+    /// same state it waits again, for ever (seen: a 5 cm move under
+    /// constant sampling with 60 ms gaps played zero gradient for 14 s).
+    /// Start at its first acting sample instead: from rest that is the same
+    /// plan, earlier.
+    fn skip_idle_start(&mut self, x: &[f64; NX]) {
         if at_rest(x) {
-            // At rest an idle sample (and the coast after it) leaves the
-            // state as it is: a plan that starts idle only waits, and
-            // re-planned from the same state it waits again, for ever
-            // (seen: a 5 cm move under constant sampling with 60 ms gaps
-            // played zero gradient for 14 s). Start at its first acting
-            // sample instead: from rest that is the same plan, earlier.
             let idle = leading_idle_samples(
                 self.solver.plan(),
                 IDLE_GRADIENT_FRACTION * S::U_MAX_T_PER_M,
@@ -445,24 +497,15 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 self.solver.shift(idle);
             }
         }
-        for (o, &u) in out.gradients_t_per_m.iter_mut().zip(self.solver.plan()) {
-            // The solver keeps |u| <= u_max; clamp again as a last invariant.
-            *o = u.clamp(-S::U_MAX_T_PER_M, S::U_MAX_T_PER_M);
-        }
-        let n = if n_max <= 1 {
+    }
+
+    /// Samples to play before the next tracking phase (the switching rule;
+    /// 1 when the host allows no more).
+    fn phase_length(&self, e: &[f64; NX], n_max: usize) -> usize {
+        if n_max <= 1 {
             1
         } else {
             self.actuation_length(e, n_max.min(S::N))
-        };
-        out.actuation_samples = n;
-        self.law.applied_samples = n;
-        self.law.last_cost = report.cost;
-        if self.settings.sampling == Sampling::Variable {
-            // Model (and refine for) the next phase as long as this one:
-            // phase lengths change slowly, so the model stays close to what
-            // plays.
-            self.law.planned_phase_samples = n;
-            self.update_schedule();
         }
     }
 
@@ -529,114 +572,6 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         report
     }
 
-    /// Enters or leaves the terminal hold (with hysteresis); true inside.
-    ///
-    /// The hold is the local controller of a dual-mode MPC, so its region
-    /// is where that law works: the capsules nearly at rest, their spread
-    /// about the group's centre (drift included) within the position
-    /// tolerance, and the centre itself within 2 mm, which the hold law
-    /// (10 rad/s, critically damped) corrects at under 8 mm/s. Requiring every capsule within the
-    /// tolerance of its own target instead refused arrivals such as
-    /// (+0.98, -0.56) mm, which the hold centres to +-0.77 mm, and sent them
-    /// back to the tables for a 0.4 s differential swing out of the band.
-    fn update_hold(&mut self, e: &[f64; NX]) -> bool {
-        let s = &self.settings;
-        let slow = |speed: f64| (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= speed);
-        let centre_m = libm::fabs(capsule_centre_m(e));
-        let was = self.sup.mode == Mode::Hold;
-        let spread_m = half_spread_m(e, 0.0);
-        let outside = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > s.hold_release_position_m);
-        // The dither's authority with the learned drag factors, never more
-        // than the model's (a larger one would admit arrivals on a guess).
-        let authority = self
-            .law
-            .station
-            .drag_authority(&self.est.applied_scales)
-            .min(1.0);
-        // Ideal sampling knows the state exactly and acts every sample:
-        // there the centre law adds differential drag of its own (about
-        // twice the dither's authority measured) and the test would refuse
-        // arrivals the hold keeps, unless shots can take a refused arrival
-        // on to rest (off the model the hold, skipping the test, kept
-        // 0.85 mm/s of relative speed for 0.3 s and left the band:
-        // docs/decisions.md).
-        let shots = self.shots_on();
-        let can_stop = |spread_m: f64| {
-            (s.sampling == Sampling::Ideal && !shots)
-                || self
-                    .law
-                    .station
-                    .can_stop(e, S::DT_S, self.hold_gap_s(), spread_m, authority)
-        };
-        let settling = self.law.station.held_s() < HOLD_SETTLING_S;
-        let holding = if was {
-            slow(s.hold_release_speed_m_per_s)
-                && spread_m <= s.hold_release_position_m
-                && !(NX / 2 <= HOLD_EARLY_EXIT_MAX_CAPSULES
-                    && outside
-                    && spread_m > HOLD_SPREAD_EXIT_M
-                    && !settling)
-                && centre_m <= HOLD_CENTRE_RELEASE_M
-                // The frames after entry tell the relative speed better
-                // than the one the entry was decided on.
-                && (!settling || can_stop(HOLD_CONFIRM_SPREAD_M))
-        } else {
-            slow(s.hold_enter_speed_m_per_s)
-                && half_spread_m(e, 0.0) <= s.hold_release_position_m
-                && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
-                && centre_m <= HOLD_CENTRE_ENTER_M
-                && can_stop(HOLD_STOP_SPREAD_M)
-        };
-        if !was && holding {
-            self.law.station.start();
-            // The end game's progress restarts when the hold ends.
-            self.forget_stall();
-        }
-        if was && !holding {
-            // Re-plan from the tables, not from the plan before the hold.
-            self.solver.reset();
-            self.law.planned_phase_samples = self.settings.max_actuation_samples;
-            self.update_schedule();
-        }
-        holding
-    }
-
-    /// The hold law: critically damped PD on the group's centre (position)
-    /// and mean speed (the one mode a single gradient controls near rest),
-    /// about the station-keeping dither (see `station`), which holds the
-    /// capsules' relative position through drag; the PD part is scaled by
-    /// the duty of the schedule and the sum bounded by a fraction of u_max.
-    fn hold_gradient(&mut self, e: &[f64; NX]) -> f64 {
-        let (_, mean_v) = capsule_means(e);
-        let centre_m = capsule_centre_m(e);
-        let mean_g = self.law.mean_gain;
-        if mean_g.is_nan() || mean_g <= 0.0 {
-            return 0.0;
-        }
-        let w = HOLD_NATURAL_FREQUENCY_RAD_PER_S;
-        let gap_s = self.hold_gap_s();
-        let (dither_m, dither_m_per_s) = self.law.station.common(S::DT_S, gap_s);
-        let mut fastest_m_per_s: f64 = 0.0;
-        for i in 0..NX / 2 {
-            fastest_m_per_s = fastest_m_per_s.max(libm::fabs(e[2 * i + 1] - dither_m_per_s));
-        }
-        let speed_room_m_per_s =
-            STATION_SPEED_BUDGET_M_PER_S - fastest_m_per_s - w * libm::fabs(centre_m - dither_m);
-        let position_room_m =
-            STATION_POSITION_BUDGET_M - half_spread_m(e, 0.0) - libm::fabs(centre_m - dither_m);
-        let dither_accel = self.law.station.next_acceleration(
-            e,
-            S::DT_S,
-            gap_s,
-            (speed_room_m_per_s, position_room_m),
-        );
-        let centre_accel = -(w * w * (centre_m - dither_m) + 2.0 * w * (mean_v - dither_m_per_s))
-            * (S::DT_S + gap_s)
-            / S::DT_S;
-        let bound = HOLD_MAX_GRADIENT_FRACTION * S::U_MAX_T_PER_M;
-        ((centre_accel + dither_accel) / mean_g).clamp(-bound, bound)
-    }
-
     /// Whether the end game has stalled: moving (some speed above
     /// `REST_SPEED_M_PER_S`) within `STALL_REGION_M` of the target while
     /// the largest position error has not shrunk by `STALL_PROGRESS` for
@@ -675,14 +610,6 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     fn forget_stall(&mut self) {
         self.sup.stall_best_m = f64::INFINITY;
         self.sup.stall_clock_s = 0.0;
-    }
-
-    /// The zero-gradient gap after each hold sample, s.
-    fn hold_gap_s(&self) -> f64 {
-        match self.settings.sampling {
-            Sampling::Ideal => 0.0,
-            Sampling::Constant | Sampling::Variable => self.est.gap_s,
-        }
     }
 
     /// Switching rule along the predicted plan from `e`.

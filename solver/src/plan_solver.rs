@@ -63,6 +63,9 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// samples, each followed by `coast_s` of zero gradient (tracking +
     /// delay); `coast_s = 0` for back-to-back samples.
     fn set_schedule(&mut self, samples_per_phase: usize, coast_s: f64);
+    /// Moves a shot in flight to a new schedule, arriving when it did
+    /// (see `Solver::reschedule_shot`); false leaves everything as it was.
+    fn reschedule_shot(&mut self, e: &[f64; NX], samples_per_phase: usize, coast_s: f64) -> bool;
     /// Refines the plan from relative state `e` (SQP on the nonlinear
     /// model). A plan from `solve_explicit` since the last call competes
     /// on its true cost, so the result never costs more than it.
@@ -172,6 +175,9 @@ impl<
     }
     fn set_schedule(&mut self, samples_per_phase: usize, coast_s: f64) {
         Solver::set_schedule(self, samples_per_phase, coast_s)
+    }
+    fn reschedule_shot(&mut self, e: &[f64; NX], samples_per_phase: usize, coast_s: f64) -> bool {
+        Solver::reschedule_shot(self, e, samples_per_phase, coast_s)
     }
     fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
         Solver::solve(self, e)

@@ -18,9 +18,13 @@ use crate::rollout::{
     nominal_scales, rollout_cost_below_scaled, rollout_with_jacobians_scaled, substep_s,
     ModelScales, Schedule, StepJacobian,
 };
-use crate::shooting::{resample, Shooter, SHOT_ITERATIONS, SHOT_MAX_LENGTHS};
+use crate::shooting::{
+    resample, Shooter, SHOT_HOLD_POSITION_TOLERANCE_M, SHOT_ITERATIONS, SHOT_MAX_LENGTHS,
+};
 use crate::spec::Spec;
 use core::marker::PhantomData;
+
+mod flight;
 
 /// All memory the solver uses: created once, reused every step. `S` the
 /// module's constants, `M` capsules, `NX = 2 M` states, window `N`, plan
@@ -322,132 +326,6 @@ impl<
             self.acquire_shot(e, &mut report);
         }
         report
-    }
-
-    /// The current shot re-solved from `e` at its remaining length (then
-    /// one sample shorter, or up to two longer): None when none converges.
-    fn reshoot(&mut self, e: &[f64; NX]) -> Option<SolveReport> {
-        let n = self.shot_samples;
-        let mut found = 0;
-        let mut p = self.plan;
-        if self
-            .shooter
-            .shoot::<S>(e, &mut p, n, SHOT_ITERATIONS, &self.schedule, &self.scales)
-        {
-            found = n;
-            self.candidate = p;
-            if n > 1
-                && self.shooter.shoot::<S>(
-                    e,
-                    &mut self.candidate,
-                    n - 1,
-                    SHOT_ITERATIONS,
-                    &self.schedule,
-                    &self.scales,
-                )
-            {
-                p = self.candidate;
-                found = n - 1;
-            }
-        } else {
-            let mut extra = 1;
-            while extra <= 2 && n + extra <= K {
-                self.candidate = self.plan;
-                if self.shooter.shoot::<S>(
-                    e,
-                    &mut self.candidate,
-                    n + extra,
-                    SHOT_ITERATIONS,
-                    &self.schedule,
-                    &self.scales,
-                ) {
-                    p = self.candidate;
-                    found = n + extra;
-                    break;
-                }
-                extra += 1;
-            }
-        }
-        if found == 0 {
-            self.shot_samples = 0;
-            return None;
-        }
-        self.plan = p;
-        self.shot_samples = found;
-        self.explicit_ready = false;
-        self.tier = Tier::Refined;
-        Some(SolveReport {
-            status: SolveStatus::Refined,
-            cost: rollout_cost_below_scaled::<S, M, NX, K>(
-                e,
-                &self.plan,
-                &self.schedule,
-                &self.scales,
-                f64::INFINITY,
-            ),
-            took_table_plan: false,
-            qp_iterations: 0,
-            max_qp_iterations: 0,
-            tier: Tier::Refined,
-        })
-    }
-
-    /// After a refinement: where the refined plan settles (in the band from
-    /// some sample to its end), look for a shot that arrives earlier,
-    /// walking the length down one sample at a time.
-    fn acquire_shot(&mut self, e: &[f64; NX], report: &mut SolveReport) {
-        let settle = self
-            .shooter
-            .settle_sample::<S>(e, &self.plan, &self.schedule, &self.scales);
-        if settle == 0 || settle > K {
-            return;
-        }
-        // Lock the arrival at `settle`, then bisect for the shortest length
-        // that converges from the plan compressed in time.
-        self.candidate = self.plan;
-        if !self.shooter.shoot::<S>(
-            e,
-            &mut self.candidate,
-            settle,
-            SHOT_ITERATIONS,
-            &self.schedule,
-            &self.scales,
-        ) {
-            return;
-        }
-        let mut p = self.candidate;
-        let mut best = settle;
-        let mut lo = 0;
-        let mut tried = 0;
-        while best - lo > 1 && tried < SHOT_MAX_LENGTHS {
-            let n = (lo + best) / 2;
-            resample(&p, best, &mut self.candidate, n);
-            if self.shooter.shoot::<S>(
-                e,
-                &mut self.candidate,
-                n,
-                SHOT_ITERATIONS,
-                &self.schedule,
-                &self.scales,
-            ) {
-                p = self.candidate;
-                best = n;
-            } else {
-                lo = n;
-            }
-            tried += 1;
-        }
-        if best > 0 {
-            self.plan = p;
-            self.shot_samples = best;
-            report.cost = rollout_cost_below_scaled::<S, M, NX, K>(
-                e,
-                &self.plan,
-                &self.schedule,
-                &self.scales,
-                f64::INFINITY,
-            );
-        }
     }
 
     /// The refinement proper (see the module docs).

@@ -87,6 +87,17 @@ impl Schedule {
         self.coast_steps > 0 && self.samples_per_phase == 1
     }
 
+    /// Time from the start of sample 0 to the end of sample `n - 1`, s:
+    /// `n` samples of `dt_s` and the coasts between them.
+    pub fn duration_s(&self, n: usize, dt_s: f64) -> f64 {
+        let coasts = if self.coast_steps > 0 && n > 0 {
+            (n - 1) / self.samples_per_phase
+        } else {
+            0
+        };
+        n as f64 * dt_s + coasts as f64 * self.coast_steps as f64 * self.coast_h_s
+    }
+
     /// Whether a coast follows plan sample `k`.
     #[inline]
     fn coasts_after(&self, k: usize) -> bool {

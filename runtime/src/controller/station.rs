@@ -40,11 +40,6 @@ pub const STATION_MAX_SPEED_M_PER_S: f64 = 3.0e-3;
 /// settle band's 5 mm/s.
 pub const STATION_SPEED_BUDGET_M_PER_S: f64 = 4.5e-3;
 
-/// Position budget of the hold, m: a pattern starts only with the
-/// amplitude whose wobble keeps every capsule's estimated error within
-/// this (the 1 mm band less the estimate's noise, about 0.1 mm).
-pub const STATION_POSITION_BUDGET_M: f64 = 0.8e-3;
-
 /// Bandwidth of the relative-position loop, rad/s (three poles there).
 pub const STATION_BANDWIDTH_RAD_PER_S: f64 = 1.0;
 
@@ -125,6 +120,22 @@ impl<const NX: usize> StationKeeper<NX> {
         spread_m: f64,
         authority: f64,
     ) -> bool {
+        self.can_stop_within(e, dt_s, gap_s, spread_m, authority, 0.0)
+    }
+
+    /// `can_stop` for a relative rate known to `rate_std` (see
+    /// `rate_std`): true when some rate within `rate_std` of the
+    /// estimated one stops inside. The stopping point is monotonic in the
+    /// rate, so the interval's ends (and zero between them) decide.
+    pub fn can_stop_within(
+        &self,
+        e: &[f64; NX],
+        dt_s: f64,
+        gap_s: f64,
+        spread_m: f64,
+        authority: f64,
+        rate_std: f64,
+    ) -> bool {
         let (mut xi, mut rate, mut reach) = (0.0, 0.0, 0.0);
         for i in 0..NX / 2 {
             xi += self.direction[i] * e[2 * i];
@@ -138,7 +149,29 @@ impl<const NX: usize> StationKeeper<NX> {
         let kappa = pattern_drag_gain(dt_s, gap_s);
         let limit = (authority * kappa * STATION_MAX_SPEED_M_PER_S * STATION_MAX_SPEED_M_PER_S)
             .max(f64::MIN_POSITIVE);
-        libm::fabs(xi + rate * libm::fabs(rate) / (2.0 * limit)) <= reach
+        let stop = |w: f64| xi + w * libm::fabs(w) / (2.0 * limit);
+        let (lo, hi) = (
+            stop(rate - rate_std.max(0.0)),
+            stop(rate + rate_std.max(0.0)),
+        );
+        let nearest = if lo <= 0.0 && hi >= 0.0 {
+            0.0
+        } else {
+            libm::fabs(lo).min(libm::fabs(hi))
+        };
+        nearest <= reach
+    }
+
+    /// Standard deviation of the relative rate `can_stop` projects, from
+    /// each capsule's speed standard deviation (independent filters).
+    pub fn rate_std(&self, speed_std_m_per_s: &[f64]) -> f64 {
+        let var: f64 = speed_std_m_per_s
+            .iter()
+            .zip(&self.direction)
+            .take(NX / 2)
+            .map(|(s, d)| d * d * s * s)
+            .sum();
+        libm::sqrt(var)
     }
 
     /// The dither's relative authority with each capsule's drag scaled by
@@ -188,16 +221,18 @@ impl<const NX: usize> StationKeeper<NX> {
     /// One actuation sample of `dt_s` followed by a zero-gradient gap of
     /// `gap_s`, from the error `e` (relative to the target): the common
     /// acceleration the dither asks for during the sample, m/s^2. A new
-    /// pattern's amplitude is at most what `headroom` leaves: (speed, m/s,
-    /// that the capsules' other motion leaves free; distance, m, between
-    /// the capsules' extreme errors and the band's edge), so that the
-    /// dither's own wobble never takes a capsule out of the band.
+    /// pattern's amplitude is at most `speed_room_m_per_s`, the speed the
+    /// capsules' other motion leaves free, so that the sum stays inside the
+    /// band's speed. Its wobble is not limited by the capsules' distance
+    /// to the band's edge: a pattern limited so stopped when the relative
+    /// drift had taken them near the edge, and the drift then took them
+    /// out (docs/decisions.md).
     pub fn next_acceleration(
         &mut self,
         e: &[f64; NX],
         dt_s: f64,
         gap_s: f64,
-        headroom: (f64, f64),
+        speed_room_m_per_s: f64,
     ) -> f64 {
         self.held_s += dt_s + gap_s;
         let (mut xi, mut xi_rate) = (0.0, 0.0);
@@ -235,11 +270,7 @@ impl<const NX: usize> StationKeeper<NX> {
             } else {
                 0.0
             };
-            let (speed_room, position_room_m) = headroom;
-            let wobble_s = pattern_half_extent_s(dt_s, gap_s);
-            let speed = speed
-                .min(speed_room.max(0.0))
-                .min((position_room_m / wobble_s).max(0.0));
+            let speed = speed.min(speed_room_m_per_s.max(0.0));
             self.amplitude_m_per_s = speed.copysign(wanted);
         }
         let next = STATION_PATTERN[self.phase] * self.amplitude_m_per_s;
@@ -273,15 +304,6 @@ fn pattern_positions_s(dt_s: f64, gap_s: f64) -> [f64; STATION_PATTERN.len()] {
 pub fn pattern_mean_position_s(dt_s: f64, gap_s: f64) -> f64 {
     let p = pattern_positions_s(dt_s, gap_s);
     p.iter().sum::<f64>() / p.len() as f64
-}
-
-/// Largest distance of [`STATION_PATTERN`]'s positions from their mean at
-/// unit amplitude, s (m per m/s).
-pub fn pattern_half_extent_s(dt_s: f64, gap_s: f64) -> f64 {
-    let mean = pattern_mean_position_s(dt_s, gap_s);
-    pattern_positions_s(dt_s, gap_s)
-        .iter()
-        .fold(0.0, |a: f64, p| a.max(libm::fabs(p - mean)))
 }
 
 /// `mean(v|v|) / V^2` of [`STATION_PATTERN`] at unit amplitude: linear
@@ -392,7 +414,7 @@ mod tests {
         let mut v_max: f64 = 0.0;
         for _ in 0..STATION_PATTERN.len() {
             let v0 = s.common(0.02, 0.02).1;
-            s.next_acceleration(&e, 0.02, 0.02, (1.0, 1.0));
+            s.next_acceleration(&e, 0.02, 0.02, 1.0);
             let v1 = s.common(0.02, 0.02).1;
             v_abs_v += v1 * v1.abs() + v0 * v0.abs();
             v_max = v_max.max(v1.abs());
@@ -401,6 +423,6 @@ mod tests {
         assert!(v_max <= STATION_MAX_SPEED_M_PER_S + 1e-12);
         assert!(s.displacement_m.abs() < 1e-15);
         let mut same = StationKeeper::<4>::new(&[16.8, 16.8]);
-        assert_eq!(same.next_acceleration(&e, 0.02, 0.02, (1.0, 1.0)), 0.0);
+        assert_eq!(same.next_acceleration(&e, 0.02, 0.02, 1.0), 0.0);
     }
 }

@@ -1,0 +1,144 @@
+//! The terminal hold: when the capsules enter and leave it, and its law
+//! (the centre's PD about the station-keeping dither).
+
+use super::braking::*;
+use super::settings::*;
+use super::station::STATION_SPEED_BUDGET_M_PER_S;
+use super::Controller;
+use super::Mode;
+use capsule_mpc_solver::*;
+
+impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
+    /// Enters or leaves the terminal hold (with hysteresis); true inside.
+    ///
+    /// The hold is the local controller of a dual-mode MPC, so its region
+    /// is where that law works: the capsules nearly at rest, their spread
+    /// about the group's centre (drift included) within the position
+    /// tolerance, and the centre itself within 2 mm, which the hold law
+    /// (10 rad/s, critically damped) corrects at under 8 mm/s. Requiring every capsule within the
+    /// tolerance of its own target instead refused arrivals such as
+    /// (+0.98, -0.56) mm, which the hold centres to +-0.77 mm, and sent them
+    /// back to the tables for a 0.4 s differential swing out of the band.
+    pub(super) fn update_hold(&mut self, e: &[f64; NX]) -> bool {
+        let s = &self.settings;
+        let slow = |speed: f64| (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= speed);
+        let centre_m = libm::fabs(capsule_centre_m(e));
+        let was = self.sup.mode == Mode::Hold;
+        let spread_m = half_spread_m(e, 0.0);
+        let outside = (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > s.hold_release_position_m);
+        // The dither's authority with the learned drag factors, never more
+        // than the model's (a larger one would admit arrivals on a guess).
+        let authority = self
+            .law
+            .station
+            .drag_authority(&self.est.applied_scales)
+            .min(1.0);
+        // Ideal sampling knows the state exactly and acts every sample:
+        // there the centre law adds differential drag of its own (about
+        // twice the dither's authority measured) and the test would refuse
+        // arrivals the hold keeps, unless shots can take a refused arrival
+        // on to rest (off the model the hold, skipping the test, kept
+        // 0.85 mm/s of relative speed for 0.3 s and left the band:
+        // docs/decisions.md).
+        let shots = self.shots_on();
+        // Tracked capsules' relative speed is known to about 1 mm/s (0.2 mm
+        // frames tens of ms apart), the size of the speeds the test is
+        // about: an arrival is admitted when a relative rate within
+        // `HOLD_ENTRY_RATE_SIGMAS` of the estimate stops inside (refusing
+        // on the estimate alone sent arrivals 0.3 mm/s apart back to the
+        // tables for a 0.5 s swing out of the band: docs/decisions.md).
+        // The confirmation while settling, on frames every sample, catches
+        // the entries the true rate does not allow.
+        let rate_std = if s.sampling == Sampling::Ideal {
+            0.0
+        } else {
+            let mut speed_std = [0.0; NX];
+            for (sd, f) in speed_std.iter_mut().zip(&self.est.filters) {
+                *sd = f.speed_std_m_per_s();
+            }
+            HOLD_ENTRY_RATE_SIGMAS * self.law.station.rate_std(&speed_std[..NX / 2])
+        };
+        let can_stop = |spread_m: f64, rate_std: f64| {
+            (s.sampling == Sampling::Ideal && !shots)
+                || self.law.station.can_stop_within(
+                    e,
+                    S::DT_S,
+                    self.hold_gap_s(),
+                    spread_m,
+                    authority,
+                    rate_std,
+                )
+        };
+        let settling = self.law.station.held_s() < HOLD_SETTLING_S;
+        let holding = if was {
+            slow(s.hold_release_speed_m_per_s)
+                && spread_m <= s.hold_release_position_m
+                && !(NX / 2 <= HOLD_EARLY_EXIT_MAX_CAPSULES
+                    && outside
+                    && spread_m > HOLD_SPREAD_EXIT_M
+                    && !settling)
+                && centre_m <= HOLD_CENTRE_RELEASE_M
+                // The frames after entry tell the relative speed better
+                // than the one the entry was decided on.
+                && (!settling || can_stop(HOLD_CONFIRM_SPREAD_M, 0.0))
+        } else {
+            slow(s.hold_enter_speed_m_per_s)
+                && half_spread_m(e, 0.0) <= s.hold_release_position_m
+                && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
+                && centre_m <= HOLD_CENTRE_ENTER_M
+                && can_stop(HOLD_STOP_SPREAD_M, rate_std)
+        };
+        if !was && holding {
+            self.law.station.start();
+            // The end game's progress restarts when the hold ends.
+            self.forget_stall();
+        }
+        if was && !holding {
+            // Re-plan from the tables, not from the plan before the hold.
+            self.solver.reset();
+            self.law.planned_phase_samples = self.settings.max_actuation_samples;
+            self.update_schedule();
+        }
+        holding
+    }
+
+    /// The hold law: critically damped PD on the group's centre (position)
+    /// and mean speed (the one mode a single gradient controls near rest),
+    /// about the station-keeping dither (see `station`), which holds the
+    /// capsules' relative position through drag; the PD part is scaled by
+    /// the duty of the schedule and the sum bounded by a fraction of u_max.
+    pub(super) fn hold_gradient(&mut self, e: &[f64; NX]) -> f64 {
+        let (_, mean_v) = capsule_means(e);
+        let centre_m = capsule_centre_m(e);
+        let mean_g = self.law.mean_gain;
+        if mean_g.is_nan() || mean_g <= 0.0 {
+            return 0.0;
+        }
+        let w = HOLD_NATURAL_FREQUENCY_RAD_PER_S;
+        let gap_s = self.hold_gap_s();
+        let (dither_m, dither_m_per_s) = self.law.station.common(S::DT_S, gap_s);
+        let mut fastest_m_per_s: f64 = 0.0;
+        for i in 0..NX / 2 {
+            fastest_m_per_s = fastest_m_per_s.max(libm::fabs(e[2 * i + 1] - dither_m_per_s));
+        }
+        let speed_room_m_per_s =
+            STATION_SPEED_BUDGET_M_PER_S - fastest_m_per_s - w * libm::fabs(centre_m - dither_m);
+        let dither_accel =
+            self.law
+                .station
+                .next_acceleration(e, S::DT_S, gap_s, speed_room_m_per_s);
+        let centre_accel = -(w * w * (centre_m - dither_m) + 2.0 * w * (mean_v - dither_m_per_s))
+            * (S::DT_S + gap_s)
+            / S::DT_S;
+        let bound = HOLD_MAX_GRADIENT_FRACTION * S::U_MAX_T_PER_M;
+        ((centre_accel + dither_accel) / mean_g).clamp(-bound, bound)
+    }
+
+    /// The zero-gradient gap after each hold sample, s.
+    pub(super) fn hold_gap_s(&self) -> f64 {
+        match self.settings.sampling {
+            Sampling::Ideal => 0.0,
+            Sampling::Constant | Sampling::Variable => self.est.gap_s,
+        }
+    }
+}

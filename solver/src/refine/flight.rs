@@ -1,0 +1,224 @@
+//! A minimum-time shot in flight: looking for one (`acquire_shot`),
+//! re-solving it every cycle from the estimate (`reshoot`, falling back to
+//! the hold's entry tolerance), and moving it to a new schedule
+//! (`reschedule_shot`).
+
+use super::*;
+
+impl<
+        S: Spec<M, NX>,
+        const M: usize,
+        const NX: usize,
+        const N: usize,
+        const K: usize,
+        E: QpEngine<N>,
+    > Solver<S, M, NX, N, K, E>
+{
+    /// Moves a shot in flight to a new schedule: the plan, stretched or
+    /// compressed to arrive when it did under the old one, is re-solved
+    /// from `e` under the new one (the length that arrives then, one
+    /// shorter, or up to two longer). True when a shot converges; then the
+    /// schedule is the new one. False (no shot, or none converges) leaves
+    /// the plan, the shot and the schedule as they were.
+    pub fn reschedule_shot(
+        &mut self,
+        e: &[f64; NX],
+        samples_per_phase: usize,
+        coast_s: f64,
+    ) -> bool {
+        let n_old = self.shot_samples;
+        if !self.shooting || n_old == 0 {
+            return false;
+        }
+        let old = self.schedule;
+        let new = Self::schedule_for(samples_per_phase, coast_s);
+        let kept_plan = self.plan;
+        self.schedule = new;
+        self.shot_samples = n_old;
+        // The same samples without the coasts first (an earlier arrival),
+        // then the plan stretched to arrive when it did.
+        if self.reshoot(e).is_some() {
+            return true;
+        }
+        let arrival_s = old.duration_s(n_old, S::DT_S);
+        let mut n = 1;
+        while n < K && new.duration_s(n, S::DT_S) < arrival_s - 1e-9 {
+            n += 1;
+        }
+        resample(&kept_plan, n_old, &mut self.plan, n);
+        self.shot_samples = n;
+        if self.reshoot(e).is_some() {
+            return true;
+        }
+        self.schedule = old;
+        self.plan = kept_plan;
+        self.shot_samples = n_old;
+        false
+    }
+
+    /// The current shot re-solved from `e` at its remaining length (then
+    /// one sample shorter, or up to two longer): None when none converges.
+    pub(super) fn reshoot(&mut self, e: &[f64; NX]) -> Option<SolveReport> {
+        let n = self.shot_samples;
+        let mut found = 0;
+        let mut p = self.plan;
+        if self
+            .shooter
+            .shoot::<S>(e, &mut p, n, SHOT_ITERATIONS, &self.schedule, &self.scales)
+        {
+            found = n;
+            self.candidate = p;
+            if n > 1
+                && self.shooter.shoot::<S>(
+                    e,
+                    &mut self.candidate,
+                    n - 1,
+                    SHOT_ITERATIONS,
+                    &self.schedule,
+                    &self.scales,
+                )
+            {
+                p = self.candidate;
+                found = n - 1;
+            }
+        } else {
+            let mut extra = 1;
+            while extra <= 2 && n + extra <= K {
+                self.candidate = self.plan;
+                if self.shooter.shoot::<S>(
+                    e,
+                    &mut self.candidate,
+                    n + extra,
+                    SHOT_ITERATIONS,
+                    &self.schedule,
+                    &self.scales,
+                ) {
+                    p = self.candidate;
+                    found = n + extra;
+                    break;
+                }
+                extra += 1;
+            }
+        }
+        if found == 0 {
+            found = self.reshoot_into_hold(e, n, &mut p);
+        }
+        if found == 0 {
+            self.shot_samples = 0;
+            return None;
+        }
+        self.plan = p;
+        self.shot_samples = found;
+        self.explicit_ready = false;
+        self.tier = Tier::Refined;
+        Some(SolveReport {
+            status: SolveStatus::Refined,
+            cost: rollout_cost_below_scaled::<S, M, NX, K>(
+                e,
+                &self.plan,
+                &self.schedule,
+                &self.scales,
+                f64::INFINITY,
+            ),
+            took_table_plan: false,
+            qp_iterations: 0,
+            max_qp_iterations: 0,
+            tier: Tier::Refined,
+        })
+    }
+
+    /// A shot in flight that no longer converges to its tolerance (the
+    /// estimate moved near its end, where too few samples are left to
+    /// correct the capsules' spread) aimed at the hold's entry instead:
+    /// every capsule within `SHOT_HOLD_POSITION_TOLERANCE_M`, at the same
+    /// speed tolerance, at the remaining length or up to two longer. The
+    /// hold takes the rest; a new manoeuvre from here would leave the band
+    /// for a second separation swing. Returns the length found (0: none),
+    /// its plan in `p`.
+    pub(super) fn reshoot_into_hold(&mut self, e: &[f64; NX], n: usize, p: &mut [f64; K]) -> usize {
+        let tight = self.shooter.position_tolerance_m();
+        if tight >= SHOT_HOLD_POSITION_TOLERANCE_M {
+            return 0;
+        }
+        self.shooter
+            .set_position_tolerance(SHOT_HOLD_POSITION_TOLERANCE_M);
+        let mut found = 0;
+        let mut extra = 0;
+        while extra <= 2 && n + extra <= K {
+            self.candidate = self.plan;
+            if self.shooter.shoot::<S>(
+                e,
+                &mut self.candidate,
+                n + extra,
+                SHOT_ITERATIONS,
+                &self.schedule,
+                &self.scales,
+            ) {
+                *p = self.candidate;
+                found = n + extra;
+                break;
+            }
+            extra += 1;
+        }
+        self.shooter.set_position_tolerance(tight);
+        found
+    }
+
+    /// After a refinement: where the refined plan settles (in the band from
+    /// some sample to its end), look for a shot that arrives earlier,
+    /// walking the length down one sample at a time.
+    pub(super) fn acquire_shot(&mut self, e: &[f64; NX], report: &mut SolveReport) {
+        let settle = self
+            .shooter
+            .settle_sample::<S>(e, &self.plan, &self.schedule, &self.scales);
+        if settle == 0 || settle > K {
+            return;
+        }
+        // Lock the arrival at `settle`, then bisect for the shortest length
+        // that converges from the plan compressed in time.
+        self.candidate = self.plan;
+        if !self.shooter.shoot::<S>(
+            e,
+            &mut self.candidate,
+            settle,
+            SHOT_ITERATIONS,
+            &self.schedule,
+            &self.scales,
+        ) {
+            return;
+        }
+        let mut p = self.candidate;
+        let mut best = settle;
+        let mut lo = 0;
+        let mut tried = 0;
+        while best - lo > 1 && tried < SHOT_MAX_LENGTHS {
+            let n = (lo + best) / 2;
+            resample(&p, best, &mut self.candidate, n);
+            if self.shooter.shoot::<S>(
+                e,
+                &mut self.candidate,
+                n,
+                SHOT_ITERATIONS,
+                &self.schedule,
+                &self.scales,
+            ) {
+                p = self.candidate;
+                best = n;
+            } else {
+                lo = n;
+            }
+            tried += 1;
+        }
+        if best > 0 {
+            self.plan = p;
+            self.shot_samples = best;
+            report.cost = rollout_cost_below_scaled::<S, M, NX, K>(
+                e,
+                &self.plan,
+                &self.schedule,
+                &self.scales,
+                f64::INFINITY,
+            );
+        }
+    }
+}
