@@ -401,7 +401,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// explicit tier alone never does).
     fn shots_on(&self) -> bool {
         let s = &self.settings;
-        s.shooting.is_on(s.sampling, NX / 2) && s.refine != Refine::None
+        s.shooting.is_on() && s.refine != Refine::None
     }
 
     /// `Fallback`: no plan. The next cycle looks the (braked) state up

@@ -60,7 +60,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         };
         let can_stop = |spread_m: f64, rate_std: f64| {
             (s.sampling == Sampling::Ideal && !shots)
-                || self.law.station.can_stop_within(
+                || self.law.station.can_stop(
                     e,
                     S::DT_S,
                     self.hold_gap_s(),

@@ -112,22 +112,12 @@ impl<const NX: usize> StationKeeper<NX> {
     /// leaves the band whatever the hold does. `authority` scales a
     /// (`drag_authority`: 1 on the model). Capsules without differential
     /// drag: true (the hold cannot do better or worse).
+    ///
+    /// `rate_std`: how well the relative rate is known (see `rate_std`;
+    /// 0 for the estimate alone): true when some rate within `rate_std` of
+    /// the estimated one stops inside. The stopping point is monotonic in
+    /// the rate, so the interval's ends (and zero between them) decide.
     pub fn can_stop(
-        &self,
-        e: &[f64; NX],
-        dt_s: f64,
-        gap_s: f64,
-        spread_m: f64,
-        authority: f64,
-    ) -> bool {
-        self.can_stop_within(e, dt_s, gap_s, spread_m, authority, 0.0)
-    }
-
-    /// `can_stop` for a relative rate known to `rate_std` (see
-    /// `rate_std`): true when some rate within `rate_std` of the
-    /// estimated one stops inside. The stopping point is monotonic in the
-    /// rate, so the interval's ends (and zero between them) decide.
-    pub fn can_stop_within(
         &self,
         e: &[f64; NX],
         dt_s: f64,
@@ -365,8 +355,8 @@ mod tests {
         assert!((scaled - (0.8 * 134.7 - 16.8) / (134.7 - 16.8)).abs() < 1e-12);
         // A weaker authority stops the same relative speed farther out.
         let state = [0.0, 0.25e-3, 0.0, -0.25e-3];
-        assert!(s.can_stop(&state, 0.02, 0.0, 2.0e-3, 1.0));
-        assert!(!s.can_stop(&state, 0.02, 0.0, 2.0e-3, 0.5));
+        assert!(s.can_stop(&state, 0.02, 0.0, 2.0e-3, 1.0, 0.0));
+        assert!(!s.can_stop(&state, 0.02, 0.0, 2.0e-3, 0.5, 0.0));
     }
 
     /// The hold's entry test: with the default capsules' drag (a =
@@ -381,26 +371,33 @@ mod tests {
         let s = StationKeeper::<4>::new(&[134.7, 16.8]);
         let (dt, gap, spread) = (0.02, 0.0, 2.0e-3);
         let state = |q: f64, w: f64| [0.5 * q, 0.5 * w, -0.5 * q, -0.5 * w];
-        assert!(s.can_stop(&state(0.0, 0.3e-3), dt, gap, spread, 1.0));
-        assert!(s.can_stop(&state(0.0, -0.3e-3), dt, gap, spread, 1.0));
-        assert!(!s.can_stop(&state(0.0, 1.0e-3), dt, gap, spread, 1.0));
+        assert!(s.can_stop(&state(0.0, 0.3e-3), dt, gap, spread, 1.0, 0.0));
+        assert!(s.can_stop(&state(0.0, -0.3e-3), dt, gap, spread, 1.0, 0.0));
+        assert!(!s.can_stop(&state(0.0, 1.0e-3), dt, gap, spread, 1.0, 0.0));
+        // Each capsule's speed known to 0.4 mm/s: the 1 mm/s relative rate
+        // may be 0.3 mm/s or less, which stops; known to 0.01 mm/s it
+        // does not.
+        let loose = s.rate_std(&[0.4e-3, 0.4e-3]);
+        let tight = s.rate_std(&[0.01e-3, 0.01e-3]);
+        assert!(s.can_stop(&state(0.0, 1.0e-3), dt, gap, spread, 1.0, loose));
+        assert!(!s.can_stop(&state(0.0, 1.0e-3), dt, gap, spread, 1.0, tight));
         let a = pattern_drag_gain(dt, gap)
             * (134.7 - 16.8)
             * STATION_MAX_SPEED_M_PER_S
             * STATION_MAX_SPEED_M_PER_S;
         let w_max = libm::sqrt(2.0 * a * spread);
-        assert!(s.can_stop(&state(0.0, 0.99 * w_max), dt, gap, spread, 1.0));
-        assert!(!s.can_stop(&state(0.0, 1.01 * w_max), dt, gap, spread, 1.0));
+        assert!(s.can_stop(&state(0.0, 0.99 * w_max), dt, gap, spread, 1.0, 0.0));
+        assert!(!s.can_stop(&state(0.0, 1.01 * w_max), dt, gap, spread, 1.0, 0.0));
         // Converging: from +1.5 mm at -0.6 mm/s the stopping point is
         // 1.5 - 0.36e-6 / (2 a) mm, inside; at -1 mm/s it is beyond -2 mm.
-        assert!(s.can_stop(&state(1.5e-3, -0.6e-3), dt, gap, spread, 1.0));
-        assert!(!s.can_stop(&state(1.5e-3, -1.0e-3), dt, gap, spread, 1.0));
+        assert!(s.can_stop(&state(1.5e-3, -0.6e-3), dt, gap, spread, 1.0, 0.0));
+        assert!(!s.can_stop(&state(1.5e-3, -1.0e-3), dt, gap, spread, 1.0, 0.0));
         // Diverging: 0.4 mm/s, which converging would stop inside, is
         // refused.
-        assert!(s.can_stop(&state(1.5e-3, -0.4e-3), dt, gap, spread, 1.0));
-        assert!(!s.can_stop(&state(1.5e-3, 0.4e-3), dt, gap, spread, 1.0));
+        assert!(s.can_stop(&state(1.5e-3, -0.4e-3), dt, gap, spread, 1.0, 0.0));
+        assert!(!s.can_stop(&state(1.5e-3, 0.4e-3), dt, gap, spread, 1.0, 0.0));
         let same = StationKeeper::<4>::new(&[50.0, 50.0]);
-        assert!(same.can_stop(&state(1.5e-3, 5.0e-3), dt, gap, spread, 1.0));
+        assert!(same.can_stop(&state(1.5e-3, 5.0e-3), dt, gap, spread, 1.0, 0.0));
     }
 
     /// Two capsules, the first with more drag: a relative error with the

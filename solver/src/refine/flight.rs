@@ -60,49 +60,40 @@ impl<
     /// one sample shorter, or up to two longer): None when none converges.
     pub(super) fn reshoot(&mut self, e: &[f64; NX]) -> Option<SolveReport> {
         let n = self.shot_samples;
-        let mut found = 0;
         let mut p = self.plan;
-        if self
-            .shooter
-            .shoot::<S>(e, &mut p, n, SHOT_ITERATIONS, &self.schedule, &self.scales)
-        {
-            found = n;
-            self.candidate = p;
-            if n > 1
-                && self.shooter.shoot::<S>(
-                    e,
-                    &mut self.candidate,
-                    n - 1,
-                    SHOT_ITERATIONS,
-                    &self.schedule,
-                    &self.scales,
-                )
+        let found =
+            if self
+                .shooter
+                .shoot::<S>(e, &mut p, n, SHOT_ITERATIONS, &self.schedule, &self.scales)
             {
-                p = self.candidate;
-                found = n - 1;
-            }
-        } else {
-            let mut extra = 1;
-            while extra <= 2 && n + extra <= K {
-                self.candidate = self.plan;
-                if self.shooter.shoot::<S>(
-                    e,
-                    &mut self.candidate,
-                    n + extra,
-                    SHOT_ITERATIONS,
-                    &self.schedule,
-                    &self.scales,
-                ) {
+                self.candidate = p;
+                if n > 1
+                    && self.shooter.shoot::<S>(
+                        e,
+                        &mut self.candidate,
+                        n - 1,
+                        SHOT_ITERATIONS,
+                        &self.schedule,
+                        &self.scales,
+                    )
+                {
                     p = self.candidate;
-                    found = n + extra;
-                    break;
+                    n - 1
+                } else {
+                    n
                 }
-                extra += 1;
-            }
-        }
-        if found == 0 {
-            found = self.reshoot_into_hold(e, n, &mut p);
-        }
+            } else {
+                // Longer, then aimed at the hold's entry; either leaves its
+                // plan in `candidate`.
+                let mut longer = self.first_converging_length(e, n + 1, n + 2);
+                if longer == 0 {
+                    longer = self.reshoot_into_hold(e, n);
+                }
+                if longer > 0 {
+                    p = self.candidate;
+                }
+                longer
+            };
         if found == 0 {
             self.shot_samples = 0;
             return None;
@@ -134,34 +125,39 @@ impl<
     /// speed tolerance, at the remaining length or up to two longer. The
     /// hold takes the rest; a new manoeuvre from here would leave the band
     /// for a second separation swing. Returns the length found (0: none),
-    /// its plan in `p`.
-    pub(super) fn reshoot_into_hold(&mut self, e: &[f64; NX], n: usize, p: &mut [f64; K]) -> usize {
+    /// its plan in `candidate`.
+    pub(super) fn reshoot_into_hold(&mut self, e: &[f64; NX], n: usize) -> usize {
         let tight = self.shooter.position_tolerance_m();
         if tight >= SHOT_HOLD_POSITION_TOLERANCE_M {
             return 0;
         }
         self.shooter
             .set_position_tolerance(SHOT_HOLD_POSITION_TOLERANCE_M);
-        let mut found = 0;
-        let mut extra = 0;
-        while extra <= 2 && n + extra <= K {
+        let found = self.first_converging_length(e, n, n + 2);
+        self.shooter.set_position_tolerance(tight);
+        found
+    }
+
+    /// The shortest length in `from..=to` (at most `K`) whose shot from
+    /// `e`, started from the current plan, converges: its plan in
+    /// `candidate`. 0 when none does.
+    fn first_converging_length(&mut self, e: &[f64; NX], from: usize, to: usize) -> usize {
+        let mut n = from;
+        while n <= to.min(K) {
             self.candidate = self.plan;
             if self.shooter.shoot::<S>(
                 e,
                 &mut self.candidate,
-                n + extra,
+                n,
                 SHOT_ITERATIONS,
                 &self.schedule,
                 &self.scales,
             ) {
-                *p = self.candidate;
-                found = n + extra;
-                break;
+                return n;
             }
-            extra += 1;
+            n += 1;
         }
-        self.shooter.set_position_tolerance(tight);
-        found
+        0
     }
 
     /// After a refinement: where the refined plan settles (in the band from
