@@ -465,3 +465,24 @@ pub fn predict_constant<S: Spec<M, NX>, const M: usize, const NX: usize>(
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `duration_s` counts the coasts between phases, none after the last
+    /// sample: the time at which a shot of `n` samples arrives.
+    #[test]
+    fn duration_counts_the_coasts_between_phases() {
+        let dt = 0.02;
+        assert_eq!(Schedule::BACK_TO_BACK.duration_s(5, dt), 5.0 * dt);
+        let one = Schedule::new(1, 0.02, 80, 0.005);
+        assert!((one.duration_s(1, dt) - 0.02).abs() < 1e-12);
+        assert!((one.duration_s(3, dt) - (0.06 + 2.0 * 0.02)).abs() < 1e-12);
+        let three = Schedule::new(3, 0.03, 80, 0.005);
+        assert!((three.duration_s(3, dt) - 0.06).abs() < 1e-12);
+        assert!((three.duration_s(4, dt) - (0.08 + 0.03)).abs() < 1e-12);
+        assert!((three.duration_s(7, dt) - (0.14 + 0.06)).abs() < 1e-12);
+        assert_eq!(three.duration_s(0, dt), 0.0);
+    }
+}
