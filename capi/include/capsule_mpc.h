@@ -218,10 +218,8 @@ int32_t capsule_mpc_set_refine(capsule_mpc_t *handle, int32_t mode);
 /* Minimum-time shots (on != 0): the plan is the shortest one that ends at the
  * target at rest, re-solved every cycle (scanner cycle: while a capsule is
  * beyond 3 mm of its target); on == 0: the refinement of the stored plans
- * alone. Default without a call: on under CAPSULE_MPC_SAMPLING_IDEAL, off
- * under the scanner cycle, where for two capsules they are experimental:
- * faster at the median (docs/decisions.md), not yet every acceptance guard.
- * Any time. */
+ * alone. Default without a call: on, under every sampling mode
+ * (docs/decisions.md). Any time. */
 int32_t capsule_mpc_set_shooting(capsule_mpc_t *handle, int32_t on);
 
 /* Which tier produced the last cycle's plan: CAPSULE_MPC_TIER_EXPLICIT,
