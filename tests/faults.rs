@@ -14,6 +14,7 @@ use capsule_mpc_runtime::controller::{
 use capsule_mpc_runtime::generated::controller::spec::{self, K, M, N, NX};
 use capsule_mpc_runtime::generated::controller::{Solver, Spec, TABLES};
 use capsule_mpc_runtime::solver::rollout::rollout_cost;
+use capsule_mpc_runtime::solver::shooting::SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S;
 use capsule_mpc_runtime::solver::{lookup, PlanSolver, Schedule, SolveStatus};
 use capsule_mpc_runtime::{CycleOutput, DefaultController, RuntimeError, RuntimeStatus};
 use capsule_mpc_sim::plant::{DisturbanceLevel, Phase, Plant};
@@ -485,7 +486,11 @@ fn solve_above_the_offline_iteration_map_is_flagged() {
     }
     let (e, out) = found.expect("no state above the map in 200 000 seeded states");
     assert_safe(&out, "above the iteration map");
+    // The controller under ideal sampling shoots, at the full state's
+    // speed tolerance: the same solver, set up alike.
     let mut s = Solver::new();
+    s.set_shooting(true);
+    s.set_shot_speed_tolerance(SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S);
     s.solve(&e);
     assert_eq!(&out.gradients_t_per_m, s.plan());
 }

@@ -20,6 +20,7 @@ use crate::rollout::{
 };
 use crate::shooting::{
     resample, Shooter, SHOT_HOLD_POSITION_TOLERANCE_M, SHOT_ITERATIONS, SHOT_MAX_LENGTHS,
+    SHOT_RESHOOT_SHORTER_LENGTHS, SHOT_UNSETTLED_SAMPLES,
 };
 use crate::spec::Spec;
 use core::marker::PhantomData;

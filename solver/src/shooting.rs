@@ -56,6 +56,14 @@ pub const SHOT_MAX_LENGTHS: usize = 8;
 /// a cycle took three capsules to 1.26 ms.
 pub const SHOT_CAPSULE_SAMPLE_BUDGET: usize = 4800;
 
+/// Shorter lengths a shot in flight tries (bisecting down to half its
+/// length) once it converged one sample shorter.
+pub const SHOT_RESHOOT_SHORTER_LENGTHS: usize = 3;
+
+/// Length of the shot looked for when the refined plan does not settle
+/// within its horizon (0.6 s of 20 ms samples).
+pub const SHOT_UNSETTLED_SAMPLES: usize = 30;
+
 /// Gauss-Newton iterations per plan length tried.
 pub const SHOT_ITERATIONS: usize = 6;
 
@@ -228,6 +236,11 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
     /// Restores the sample budget (once per control cycle).
     pub fn start_budget(&mut self) {
         self.budget_samples = Self::BUDGET_SAMPLES;
+    }
+
+    /// Samples of this cycle's budget not yet spent.
+    pub fn budget_left(&self) -> usize {
+        self.budget_samples
     }
 
     /// Whether `n` more samples fit the budget; takes them if so.

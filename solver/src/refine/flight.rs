@@ -78,7 +78,20 @@ impl<
                     )
                 {
                     p = self.candidate;
-                    n - 1
+                    // It still shortens: look further down while most of
+                    // the cycle's budget is left (the shot may have been
+                    // acquired from a longer local solution).
+                    if self.shooter.budget_left() * 2 >= Shooter::<M, NX, K>::BUDGET_SAMPLES {
+                        self.shorten_shot(
+                            e,
+                            &mut p,
+                            n - 1,
+                            (n - 1) / 2,
+                            SHOT_RESHOOT_SHORTER_LENGTHS,
+                        )
+                    } else {
+                        n - 1
+                    }
                 } else {
                     n
                 }
@@ -167,9 +180,18 @@ impl<
         let settle = self
             .shooter
             .settle_sample::<S>(e, &self.plan, &self.schedule, &self.scales);
-        if settle == 0 || settle > K {
+        if settle == 0 {
             return;
         }
+        // A plan that does not settle within the horizon: a shot of
+        // `SHOT_UNSETTLED_SAMPLES` (the search shortens it from there).
+        // Not longer: long shots played open loop between frames miss
+        // when the capsules are not the model.
+        let settle = if settle > K {
+            SHOT_UNSETTLED_SAMPLES.min(K)
+        } else {
+            settle
+        };
         // Lock the arrival at `settle`, then bisect for the shortest length
         // that converges from the plan compressed in time.
         self.candidate = self.plan;
@@ -184,27 +206,7 @@ impl<
             return;
         }
         let mut p = self.candidate;
-        let mut best = settle;
-        let mut lo = 0;
-        let mut tried = 0;
-        while best - lo > 1 && tried < SHOT_MAX_LENGTHS {
-            let n = (lo + best) / 2;
-            resample(&p, best, &mut self.candidate, n);
-            if self.shooter.shoot::<S>(
-                e,
-                &mut self.candidate,
-                n,
-                SHOT_ITERATIONS,
-                &self.schedule,
-                &self.scales,
-            ) {
-                p = self.candidate;
-                best = n;
-            } else {
-                lo = n;
-            }
-            tried += 1;
-        }
+        let best = self.shorten_shot(e, &mut p, settle, 0, SHOT_MAX_LENGTHS);
         if best > 0 {
             self.plan = p;
             self.shot_samples = best;
@@ -216,5 +218,39 @@ impl<
                 f64::INFINITY,
             );
         }
+    }
+
+    /// Bisects for the shortest length in `lo + 1..best` whose shot from
+    /// `e`, started from `p` (converged at `best`) compressed in time,
+    /// converges, trying at most `tries` lengths. `p` becomes that shot;
+    /// returns its length.
+    fn shorten_shot(
+        &mut self,
+        e: &[f64; NX],
+        p: &mut [f64; K],
+        mut best: usize,
+        mut lo: usize,
+        tries: usize,
+    ) -> usize {
+        let mut tried = 0;
+        while best - lo > 1 && tried < tries {
+            let n = (lo + best) / 2;
+            resample(p, best, &mut self.candidate, n);
+            if self.shooter.shoot::<S>(
+                e,
+                &mut self.candidate,
+                n,
+                SHOT_ITERATIONS,
+                &self.schedule,
+                &self.scales,
+            ) {
+                *p = self.candidate;
+                best = n;
+            } else {
+                lo = n;
+            }
+            tried += 1;
+        }
+        best
     }
 }
