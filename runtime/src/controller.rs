@@ -555,8 +555,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // iteration map it is checked against measured those.
         let mut report = self.solver.solve(e);
         for _ in 1..rounds {
-            // A converged shot is already the answer from this state.
-            if report.status == SolveStatus::OutOfRange || self.solver.shot_samples() > 0 {
+            // A converged shot is already the answer from this state; the
+            // cycle's compute budget bounds the rounds.
+            if report.status == SolveStatus::OutOfRange
+                || self.solver.shot_samples() > 0
+                || !self.solver.refinement_fits()
+            {
                 break;
             }
             let r = self.solver.solve(e);

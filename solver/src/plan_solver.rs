@@ -86,6 +86,8 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// Starts a control cycle: restores the per-cycle compute budget of
     /// the solves that follow (the shooting's).
     fn start_cycle(&mut self);
+    /// Whether another `solve` fits this cycle's compute budget.
+    fn refinement_fits(&self) -> bool;
     /// A converged shot's terminal speed tolerance, m/s (see
     /// `shooting::SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S`).
     fn set_shot_speed_tolerance(&mut self, tolerance_m_per_s: f64);
@@ -193,6 +195,9 @@ impl<
     }
     fn start_cycle(&mut self) {
         Solver::start_cycle(self)
+    }
+    fn refinement_fits(&self) -> bool {
+        Solver::refinement_fits(self)
     }
     fn set_shot_speed_tolerance(&mut self, tolerance_m_per_s: f64) {
         Solver::set_shot_speed_tolerance(self, tolerance_m_per_s)

@@ -257,6 +257,12 @@ impl<
         self.shooter.start_budget();
     }
 
+    /// Whether another refinement fits this cycle's compute budget (each
+    /// `solve` takes a refinement's share, its shots what they roll out).
+    pub fn refinement_fits(&self) -> bool {
+        self.shooter.refinement_fits()
+    }
+
     /// A converged shot's terminal speed tolerance, m/s.
     pub fn set_shot_speed_tolerance(&mut self, tolerance_m_per_s: f64) {
         self.shooter.set_speed_tolerance(tolerance_m_per_s);
@@ -323,6 +329,7 @@ impl<
             }
         }
         let mut report = self.solve_refined(e);
+        self.shooter.charge_refinement();
         if shooting && report.status != SolveStatus::OutOfRange {
             self.acquire_shot(e, &mut report);
         }

@@ -56,6 +56,13 @@ pub const SHOT_MAX_LENGTHS: usize = 8;
 /// a cycle took three capsules to 1.26 ms.
 pub const SHOT_CAPSULE_SAMPLE_BUDGET: usize = 4800;
 
+/// What one refinement (the SQP over the whole plan and its window QP)
+/// takes from the same budget, in plan lengths: its worst case measured
+/// about as long as four rolled-out plans with Jacobians. Variable
+/// sampling refines up to N times a cycle; charging the refinements after
+/// the first keeps the whole cycle (not only its shots) inside the budget.
+pub const REFINE_BUDGET_PLANS: usize = 4;
+
 /// Shorter lengths a shot in flight tries (bisecting down to half its
 /// length) once it converged one sample shorter.
 pub const SHOT_RESHOOT_SHORTER_LENGTHS: usize = 3;
@@ -88,6 +95,8 @@ pub struct Shooter<const M: usize, const NX: usize, const K: usize> {
     fixed: [bool; K],
     /// Plan samples left of this cycle's budget (`BUDGET_SAMPLES`).
     budget_samples: usize,
+    /// Refinements this cycle (`charge_refinement`).
+    refinements: usize,
     /// Terminal speed tolerance, m/s (`set_speed_tolerance`).
     speed_tolerance_m_per_s: f64,
     /// Terminal position tolerance, m (`set_position_tolerance`).
@@ -203,6 +212,7 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
             step: [0.0; K],
             fixed: [false; K],
             budget_samples: Self::BUDGET_SAMPLES,
+            refinements: 0,
             speed_tolerance_m_per_s: SHOT_SPEED_TOLERANCE_M_PER_S,
             position_tolerance_m: SHOT_POSITION_TOLERANCE_M,
         }
@@ -236,11 +246,28 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
     /// Restores the sample budget (once per control cycle).
     pub fn start_budget(&mut self) {
         self.budget_samples = Self::BUDGET_SAMPLES;
+        self.refinements = 0;
     }
 
     /// Samples of this cycle's budget not yet spent.
     pub fn budget_left(&self) -> usize {
         self.budget_samples
+    }
+
+    /// Counts a refinement: the cycle's first is outside the budget (one
+    /// solve a cycle, as under ideal and constant sampling, keeps the whole
+    /// budget for its shots); each further one takes its share
+    /// (`REFINE_BUDGET_PLANS` plan lengths, or what is left).
+    pub fn charge_refinement(&mut self) {
+        if self.refinements > 0 {
+            self.budget_samples = self.budget_samples.saturating_sub(REFINE_BUDGET_PLANS * K);
+        }
+        self.refinements += 1;
+    }
+
+    /// Whether another refinement fits this cycle's budget.
+    pub fn refinement_fits(&self) -> bool {
+        self.budget_samples >= REFINE_BUDGET_PLANS * K
     }
 
     /// Whether `n` more samples fit the budget; takes them if so.
