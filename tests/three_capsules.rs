@@ -243,15 +243,14 @@ fn off_grid_targets_settle() {
 
 /// Constant and variable sampling with 0.2 mm noise and the paper's
 /// disturbance, seeds 1-4, over targets spread through the workspace
-/// (corners, faces, the issue's (1, 1, 1) cm, mixed directions). Issue 16
-/// asks for every run within 3 s, which is not met (docs/known-limits.md,
-/// "Three capsules"): measured with the shots, of 40 runs each, constant
-/// sampling 40 settle in the 8 s run (28 within 3 s, median 1.88 s),
-/// variable 39 (30 within 3 s, median 1.82 s); without them 35 (16, 3.43
-/// s) and 32 (14, 3.33 s). Under variable sampling the separation (3, -3,
-/// 3) cm, seed 2 (bound 3.72 s) does not settle (held) in 8 s. Asserted
-/// as a floor against regressions: at least 40 and 38 runs settle, no run
-/// is refused.
+/// (corners, faces, the issue's (1, 1, 1) cm, mixed directions), strict
+/// settle (in the band from then to the end of the 8 s run). Issue 26 asks
+/// for every run within 2x of its schedule's minimum time (the coasted
+/// bound under constant sampling where the tables have it, else the ideal
+/// one), which is not met (docs/known-limits.md, "Three capsules"):
+/// measured, of 40 runs each, constant sampling 40 settle, 36 within 2x;
+/// variable 39 settle, 35 within 2x. Asserted as floors against
+/// regressions: at least 40 and 38 runs settle, 34 and 33 within 2x.
 #[test]
 fn scanner_sampling_settles_with_noise_and_disturbance() {
     let config = three();
@@ -272,6 +271,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
     for sampling in [Sampling::Constant, Sampling::Variable] {
         let mut settled = Vec::new();
         let mut never = Vec::new();
+        let mut within_2x = 0;
         for t in targets_cm {
             for seed in 1..=4 {
                 let state: Vec<f64> = t.iter().flat_map(|&p| [p / 100.0, 0.0]).collect();
@@ -282,31 +282,39 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
                     DisturbanceLevel::Paper.config_of_kind(&model, seed, DisturbanceKind::Random);
                 let m = run(&config, &opts).unwrap().metrics;
                 let label = format!("{t:?} cm seed {seed}");
-                match m.settle_held_s {
-                    Some(s) => settled.push((s, label)),
-                    None => never.push(label),
+                let bound_s = m
+                    .schedule_min_time_s
+                    .or(m.min_time_bound_s)
+                    .unwrap_or(f64::INFINITY);
+                match m.settle_time_s {
+                    Some(s) => {
+                        if s <= 2.0 * bound_s {
+                            within_2x += 1;
+                        }
+                        settled.push((s, label));
+                    }
+                    None => never.push((label, m.settle_held_s)),
                 }
             }
         }
         settled.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let within_3 = settled.iter().filter(|(s, _)| *s <= 3.0).count();
         let median = settled[settled.len() / 2].0;
         println!(
-            "M = 3, {} sampling: {} of 40 settle, {within_3} within 3 s, median {median:.2} s, worst {:?}; never: {never:?}",
+            "M = 3, {} sampling: {} of 40 settle (strict), {within_2x} within 2x of the schedule's bound, median {median:.2} s, worst {:?}; never (held settle): {never:?}",
             sampling.name(),
             settled.len(),
             settled.last()
         );
-        summaries.push((sampling, settled.len()));
+        summaries.push((sampling, settled.len(), within_2x));
     }
-    for (sampling, settled) in summaries {
-        let floor = match sampling {
-            Sampling::Constant => 40,
-            _ => 38,
+    for (sampling, settled, within_2x) in summaries {
+        let (settle_floor, within_2x_floor) = match sampling {
+            Sampling::Constant => (40, 34),
+            _ => (38, 33),
         };
         assert!(
-            settled >= floor,
-            "{}: {settled} of 40 settled",
+            settled >= settle_floor && within_2x >= within_2x_floor,
+            "{}: {settled} of 40 settled, {within_2x} within 2x",
             sampling.name()
         );
     }
