@@ -468,6 +468,12 @@ pub struct BenchArgs {
     /// Write the timings (JSON) here.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Config file (TOML) of another compiled controller (e.g.
+    /// configs/three-capsules.toml): its controller step only, over its
+    /// own closed-loop states and index cells. The embedded config when
+    /// absent.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Args)]

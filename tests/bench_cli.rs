@@ -64,3 +64,56 @@ fn bench_writes_json_with_sane_values() {
     assert!(v["table_bytes"].as_u64().unwrap() > 0);
     assert_eq!(v["worst_states"].as_array().unwrap().len(), 5);
 }
+
+/// `bench --config configs/three-capsules.toml`: the three-capsule
+/// controller step, timed over its own states; a config with no compiled
+/// controller is refused with a message that says how to generate one.
+#[test]
+fn bench_times_the_three_capsule_module() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bench3.json");
+    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/three-capsules.toml");
+    let out = Command::new(env!("CARGO_BIN_EXE_capsule-mpc"))
+        .args([
+            "bench",
+            "--config",
+            config,
+            "--sampling",
+            "variable",
+            "--states",
+            "300",
+            "--json",
+        ])
+        .arg(&path)
+        .output()
+        .expect("run capsule-mpc");
+    assert!(
+        out.status.success(),
+        "bench failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(v["capsules"], 3);
+    assert_eq!(v["module"], "three_capsules");
+    assert_eq!(v["sampling"], "variable");
+    for (key, t) in v["controller_step_ns"].as_object().unwrap() {
+        let (median, p99, max) = (
+            t["median"].as_u64().unwrap(),
+            t["p99"].as_u64().unwrap(),
+            t["max"].as_u64().unwrap(),
+        );
+        assert!(median > 0 && median <= p99 && p99 <= max, "{key}: {t}");
+    }
+
+    let other = dir.path().join("other.toml");
+    let text = std::fs::read_to_string(config).unwrap();
+    std::fs::write(&other, text.replacen("0.47", "0.48", 1)).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_capsule-mpc"))
+        .args(["bench", "--config"])
+        .arg(&other)
+        .output()
+        .expect("run capsule-mpc");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("no compiled controller"), "{stderr}");
+}

@@ -67,7 +67,8 @@
 //! `peers-osqp`, [`open_peer`]) on the warm case, [`tiers`] times the two
 //! tiers and the explicit QP against the peers, and
 //! [`reference`](mod@reference) checks the config against the generated
-//! spec.
+//! spec; [`module_steps`] times the controller step of another compiled
+//! module (`bench --config`, e.g. three capsules).
 
 // Index loops mirror the math (S[k][j], H[a][b]), as in the template.
 #![allow(clippy::needless_range_loop)]
@@ -75,6 +76,7 @@
 pub mod clarabel_peer;
 pub mod engine;
 pub mod harness;
+pub mod module_steps;
 pub mod open_peer;
 #[cfg(feature = "peers-osqp")]
 pub mod osqp_peer;

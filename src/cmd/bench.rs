@@ -2,9 +2,10 @@
 //! same states (see [`crate::bench`]).
 
 use crate::bench::harness::{measure, prototype_controller_with};
+use crate::bench::module_steps;
 use crate::bench::reference::RefProblem;
 use crate::bench::states::sample_states;
-use crate::cli::BenchArgs;
+use crate::cli::{load_config, BenchArgs};
 use anyhow::{bail, Result};
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_sim::closed_loop::Sampling;
@@ -15,6 +16,9 @@ use serde_json::json;
 pub fn run(args: &BenchArgs) -> Result<()> {
     if args.states == 0 {
         bail!("--states must be at least 1");
+    }
+    if let Some(path) = &args.config {
+        return run_module(args, path);
     }
     let config = Config::embedded_default();
     let problem = RefProblem::from_config(&config)?;
@@ -43,6 +47,60 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     report["seed"] = json!(args.seed);
     report["sampling"] = json!(sampling.name());
     report["spec_mismatch"] = json!(mismatch);
+    if let Some(path) = &args.json {
+        write_json_atomic(path, &report)?;
+    }
+    Ok(())
+}
+
+/// `capsule-mpc bench --config FILE`: the controller step of the compiled
+/// module generated for that config (see [`crate::bench::module_steps`]).
+fn run_module(args: &BenchArgs, path: &std::path::Path) -> Result<()> {
+    use capsule_mpc_generator::generate::ControllerModule;
+    use capsule_mpc_runtime::generated::{controller, three_capsules};
+    use capsule_mpc_sim::closed_loop::compiled_controller_for;
+    let config = load_config(Some(path))?;
+    let module = compiled_controller_for(&config)?;
+    let sampling = Sampling::from(args.sampling);
+    eprintln!(
+        "bench: {} states of module `{}` (seed {})",
+        args.states,
+        module.module_name(),
+        args.seed
+    );
+    let mut report = std::thread::scope(|scope| {
+        scope
+            .spawn(|| match module {
+                ControllerModule::Controller => module_steps::measure::<
+                    controller::Solver,
+                    { controller::spec::NX },
+                    { controller::spec::K },
+                >(
+                    &config,
+                    &controller::TABLES,
+                    sampling.runtime(),
+                    args.states,
+                    args.seed,
+                ),
+                ControllerModule::ThreeCapsules => module_steps::measure::<
+                    three_capsules::Solver,
+                    { three_capsules::spec::NX },
+                    { three_capsules::spec::K },
+                >(
+                    &config,
+                    &three_capsules::TABLES,
+                    sampling.runtime(),
+                    args.states,
+                    args.seed,
+                ),
+            })
+            .join()
+            .map_err(|_| anyhow::anyhow!("the benchmark thread panicked"))
+    })??;
+    report["states"] = json!(args.states);
+    report["seed"] = json!(args.seed);
+    report["sampling"] = json!(sampling.name());
+    report["module"] = json!(module.module_name());
     if let Some(path) = &args.json {
         write_json_atomic(path, &report)?;
     }
