@@ -84,7 +84,8 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// Whether `solve` looks for minimum-time shots (see `shooting`).
     fn set_shooting(&mut self, on: bool);
     /// Starts a control cycle: restores the per-cycle compute budget of
-    /// the solves that follow (the shooting's).
+    /// the solves that follow (their shots and every refinement after the
+    /// first).
     fn start_cycle(&mut self);
     /// Whether another `solve` fits this cycle's compute budget.
     fn refinement_fits(&self) -> bool;

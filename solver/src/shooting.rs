@@ -561,3 +561,35 @@ pub fn resample<const K: usize>(from: &[f64; K], m: usize, to: &mut [f64; K], n:
         k += 1;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One cycle's budget covers its shots and every refinement after the
+    /// first: the first is free (one solve a cycle keeps the whole budget
+    /// for its shots), the next ones take their share until none fits.
+    #[test]
+    fn refinements_after_the_first_spend_the_cycle_budget() {
+        const K: usize = 80;
+        let mut s = Shooter::<2, 4, K>::new();
+        s.start_budget();
+        let full = Shooter::<2, 4, K>::BUDGET_SAMPLES;
+        s.charge_refinement();
+        assert_eq!(s.budget_left(), full);
+        let mut refinements = 1;
+        while s.refinement_fits() {
+            s.charge_refinement();
+            refinements += 1;
+        }
+        assert_eq!(refinements, 1 + full / (REFINE_BUDGET_PLANS * K));
+        assert!(s.budget_left() < REFINE_BUDGET_PLANS * K);
+        // Shots spend the same budget.
+        s.start_budget();
+        assert!(s.spend(full - REFINE_BUDGET_PLANS * K + 1));
+        s.charge_refinement();
+        assert!(!s.refinement_fits());
+        s.charge_refinement();
+        assert_eq!(s.budget_left(), 0);
+    }
+}
