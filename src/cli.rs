@@ -251,6 +251,15 @@ pub struct SimulateArgs {
     /// (one for all or one per capsule).
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub plant_gain_scale: Option<Vec<f64>>,
+    /// Drag factors the controller is told at the start, as a calibration
+    /// would give them (one for all or one per capsule; standard deviation
+    /// 1 %): `Controller::set_model_factors`. Without it the controller
+    /// starts from the model and learns them from frames.
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub calibrated_drag_scale: Option<Vec<f64>>,
+    /// Gain factors the controller is told at the start (as above).
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub calibrated_gain_scale: Option<Vec<f64>>,
     #[arg(long, value_enum, default_value = "variable")]
     pub sampling: SamplingArg,
     #[arg(long, value_enum, default_value = "paper")]
@@ -598,6 +607,15 @@ impl From<SwitchingArg> for capsule_mpc_runtime::controller::SwitchingRule {
             SwitchingArg::Paper => capsule_mpc_runtime::controller::SwitchingRule::Paper,
         }
     }
+}
+
+/// The factors of `--calibrated-drag-scale` and `--calibrated-gain-scale`
+/// (None when neither is given).
+pub fn calibrated(
+    drag: &Option<Vec<f64>>,
+    gain: &Option<Vec<f64>>,
+) -> Option<capsule_mpc_sim::mismatch::PlantMismatch> {
+    (drag.is_some() || gain.is_some()).then(|| mismatch(drag, gain))
 }
 
 /// The plant mismatch of `--plant-drag-scale` and `--plant-gain-scale`

@@ -222,6 +222,17 @@ int32_t capsule_mpc_set_refine(capsule_mpc_t *handle, int32_t mode);
  * (docs/decisions.md). Any time. */
 int32_t capsule_mpc_set_shooting(capsule_mpc_t *handle, int32_t on);
 
+/* What is known of capsule `capsule`'s (0-based) gain and drag against the
+ * model, e.g. from `capsule-mpc calibrate`: factors (1 = the model) and
+ * their standard deviations. They replace the estimate; the plans use them
+ * at once where they differ from the model significantly, and the frames
+ * keep refining them; kept across capsule_mpc_reset. BAD_SETTING for a
+ * capsule beyond the count, a factor outside [0.25, 4] or a deviation
+ * outside [0.001, 1]; NON_FINITE for NaN or infinity. */
+int32_t capsule_mpc_set_model_factors(capsule_mpc_t *handle, uint32_t capsule,
+                                      double gain, double drag,
+                                      double gain_std, double drag_std);
+
 /* Which tier produced the last cycle's plan: CAPSULE_MPC_TIER_EXPLICIT,
  * _REFINED, or _NONE when the cycle solved nothing (before any cycle, no
  * target, terminal hold, fallback). */

@@ -608,6 +608,35 @@ pub unsafe extern "C" fn capsule_mpc_set_shooting(handle: *mut CapsuleMpc, on: i
     code(r)
 }
 
+/// What is known of capsule `capsule`'s (0-based) gain and drag against
+/// the model, e.g. from `capsule-mpc calibrate`: factors (1 = the model)
+/// and their standard deviations. They replace the estimate, the plans use
+/// them at once where they differ from the model significantly, and the
+/// frames keep refining them; kept across `capsule_mpc_reset`. BAD_SETTING
+/// for a capsule beyond the count, a factor outside [0.25, 4] or a
+/// deviation outside [0.001, 1]; NON_FINITE for NaN or infinity.
+///
+/// # Safety
+/// `handle` as for `capsule_mpc_reset`.
+#[no_mangle]
+pub unsafe extern "C" fn capsule_mpc_set_model_factors(
+    handle: *mut CapsuleMpc,
+    capsule: u32,
+    gain: f64,
+    drag: f64,
+    gain_std: f64,
+    drag_std: f64,
+) -> i32 {
+    let r = (|| {
+        // SAFETY: see the function's contract; workspace checks the handle.
+        let ws = unsafe { workspace(handle) }?;
+        ws.controller
+            .set_model_factors(capsule as usize, [gain, drag], [gain_std, drag_std])
+            .map_err(map_err)
+    })();
+    code(r)
+}
+
 /// Which tier produced the last cycle's plan (`CAPSULE_MPC_TIER_*`;
 /// `_NONE` when it solved nothing: before any cycle, no target, the
 /// terminal hold or the fallback).

@@ -236,6 +236,54 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         (capsule < NX / 2).then(|| &self.est.scales[capsule])
     }
 
+    /// What is known of capsule `capsule`'s gain and drag factors against
+    /// the model (e.g. from `capsule-mpc calibrate`): `factors` [gain, drag]
+    /// (1 = the model) with standard deviations `std_devs`. They replace
+    /// the estimate; the refinement plans with them at once where they
+    /// differ from the model significantly, as with learned ones, and the
+    /// frames keep refining them. Without it the estimator starts from the
+    /// model and learns the factors from frames, which under variable
+    /// sampling arrive late (docs/known-limits.md). Kept across `reset` and
+    /// new targets.
+    pub fn set_model_factors(
+        &mut self,
+        capsule: usize,
+        factors: [f64; 2],
+        std_devs: [f64; 2],
+    ) -> Result<(), RuntimeError> {
+        if capsule >= NX / 2 {
+            return Err(RuntimeError::BadSetting("capsule"));
+        }
+        if factors.iter().any(|f| !f.is_finite()) {
+            return Err(RuntimeError::NonFinite("factors"));
+        }
+        if std_devs.iter().any(|s| !s.is_finite()) {
+            return Err(RuntimeError::NonFinite("std_devs"));
+        }
+        if factors
+            .iter()
+            .any(|f| !(MODEL_FACTOR_MIN..=MODEL_FACTOR_MAX).contains(f))
+        {
+            return Err(RuntimeError::BadSetting("factors"));
+        }
+        if std_devs
+            .iter()
+            .any(|s| !(MODEL_FACTOR_STD_MIN..=MODEL_FACTOR_STD_MAX).contains(s))
+        {
+            return Err(RuntimeError::BadSetting("std_devs"));
+        }
+        let scale = &mut self.est.scales[capsule];
+        scale.mean = factors;
+        scale.cov = [
+            std_devs[0] * std_devs[0],
+            0.0,
+            0.0,
+            std_devs[1] * std_devs[1],
+        ];
+        self.refresh_applied_scales();
+        Ok(())
+    }
+
     /// Sets a new target `[x1, v1, x2, v2, ...]`: positions inside the
     /// workspace, speeds exactly 0 (the plans bring the capsules to rest; a
     /// moving target is refused with `TargetNotAtRest`). Reached from

@@ -6,8 +6,8 @@ use crate::metrics::Metrics;
 use crate::mismatch::PlantMismatch;
 use crate::plant::{Phase, Plant};
 use crate::report::{
-    FactorEstimate, FrameCounts, MeasurementRecord, ModeChange, ModelParams, PlantReport,
-    RunReport, TierCycles,
+    CalibratedReport, FactorEstimate, FrameCounts, MeasurementRecord, ModeChange, ModelParams,
+    PlantReport, RunReport, TierCycles,
 };
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
@@ -127,7 +127,17 @@ pub struct RunOptions {
     pub refine: RefineMode,
     /// How the simulated capsules differ from the model (none by default).
     pub mismatch: PlantMismatch,
+    /// Factors the controller is told at the start
+    /// (`Controller::set_model_factors`, e.g. from a calibration), each
+    /// with standard deviation `known_factor_std`; None: it starts from
+    /// the model and learns them.
+    pub known_factors: Option<PlantMismatch>,
+    pub known_factor_std: f64,
 }
+
+/// Default standard deviation of told factors (`RunOptions`): a
+/// calibration's typical 1 %.
+pub const KNOWN_FACTOR_STD: f64 = 0.01;
 
 impl RunOptions {
     /// Options from the config with the given target and sampling.
@@ -150,6 +160,8 @@ impl RunOptions {
             shooting: None,
             refine: config.controller.refine,
             mismatch: PlantMismatch::default(),
+            known_factors: None,
+            known_factor_std: KNOWN_FACTOR_STD,
         }
     }
 }
@@ -348,6 +360,14 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         }
         e => anyhow::anyhow!("controller settings: {e:?}"),
     })?;
+    if let Some(known) = &opts.known_factors {
+        let (drag, gain) = known.factors_named(NX / 2, "calibrated")?;
+        let std = opts.known_factor_std;
+        for i in 0..NX / 2 {
+            ctl.set_model_factors(i, [gain[i], drag[i]], [std, std])
+                .map_err(|e| anyhow::anyhow!("calibrated factors of capsule {}: {e:?}", i + 1))?;
+        }
+    }
     set_target_or_explain(&mut ctl, &target, "target")?;
     let retarget: Option<(f64, [f64; NX])> = match &opts.retarget {
         Some(r) => {
@@ -485,6 +505,14 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
             drag_scale: drag,
             gain_scale: gain,
             params: ModelParams::from_model(&plant_model),
+        });
+    }
+    if let Some(known) = &opts.known_factors {
+        let (drag, gain) = known.factors_named(NX / 2, "calibrated")?;
+        report.calibrated = Some(CalibratedReport {
+            drag_scale: drag,
+            gain_scale: gain,
+            std: opts.known_factor_std,
         });
     }
     report.sampling = Some(opts.sampling.name().to_string());

@@ -63,9 +63,15 @@ impl PlantMismatch {
 
     /// Per-capsule drag and gain factors for `m` capsules.
     pub fn factors(&self, m: usize) -> Result<(Vec<f64>, Vec<f64>)> {
+        self.factors_named(m, "plant")
+    }
+
+    /// As `factors`, errors naming the options `--{what}-drag-scale` and
+    /// `--{what}-gain-scale` ("plant", "calibrated").
+    pub fn factors_named(&self, m: usize, what: &str) -> Result<(Vec<f64>, Vec<f64>)> {
         Ok((
-            Self::expand("plant drag scale", &self.drag_scale, m)?,
-            Self::expand("plant gain scale", &self.gain_scale, m)?,
+            Self::expand(&format!("{what} drag scale"), &self.drag_scale, m)?,
+            Self::expand(&format!("{what} gain scale"), &self.gain_scale, m)?,
         ))
     }
 

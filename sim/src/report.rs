@@ -59,6 +59,16 @@ pub struct PlantReport {
     pub params: ModelParams,
 }
 
+/// The factors the controller was told at the start
+/// (`--calibrated-drag-scale`, `--calibrated-gain-scale`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CalibratedReport {
+    pub drag_scale: Vec<f64>,
+    pub gain_scale: Vec<f64>,
+    /// Standard deviation given with each.
+    pub std: f64,
+}
+
 /// Everything `simulate --json` writes. Arrays `t`, `x`, `u`, `phase` are
 /// row-aligned with the plant records (`u[k]` and `phase[k]` hold from `t[k]`
 /// to `t[k+1]`); `x[k]` is the true state [x1, v1, x2, v2, ...] in m, m/s.
@@ -76,6 +86,9 @@ pub struct RunReport {
     /// The plant when it differs from the model (None: the plant is the model).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plant: Option<PlantReport>,
+    /// Factors the controller was told (None: it started from the model).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibrated: Option<CalibratedReport>,
     /// Scenario name ("A", "C", "custom", ...).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario: Option<String>,
@@ -167,6 +180,7 @@ impl RunReport {
             target,
             metrics,
             plant: None,
+            calibrated: None,
             scenario: None,
             sampling: None,
             fallback_cycles: None,

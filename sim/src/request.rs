@@ -38,6 +38,9 @@ pub struct SimulateRequest {
     /// None: the config's extra delay (refused with ideal sampling).
     pub extra_delay_s: Option<f64>,
     pub mismatch: PlantMismatch,
+    /// Factors the controller is told at the start (see
+    /// `RunOptions::known_factors`).
+    pub known_factors: Option<PlantMismatch>,
 }
 
 impl SimulateRequest {
@@ -62,6 +65,7 @@ impl SimulateRequest {
             refine: None,
             extra_delay_s: None,
             mismatch: PlantMismatch::default(),
+            known_factors: None,
         }
     }
 
@@ -91,6 +95,9 @@ impl SimulateRequest {
             bail!("extra delay {d} applies to the scanner cycle (constant or variable sampling); ideal sampling has no tracking phase to delay");
         }
         self.mismatch.factors(m)?;
+        if let Some(known) = &self.known_factors {
+            known.factors_named(m, "calibrated")?;
+        }
         let mut opts = RunOptions::new(config, self.target.clone(), self.sampling);
         opts.start_m = self.start_m.clone();
         opts.duration_s = self.duration_s;
@@ -105,6 +112,7 @@ impl SimulateRequest {
         opts.hold = self.hold;
         opts.shooting = self.shooting;
         opts.mismatch = self.mismatch.clone();
+        opts.known_factors = self.known_factors.clone();
         if let Some(r) = self.refine {
             opts.refine = r;
         }

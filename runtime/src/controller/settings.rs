@@ -247,6 +247,14 @@ pub const GLITCH_FRAMES: usize = 20;
 /// `model_drag_uncertainty`: the magnetization and the effective mass are
 /// known to about 10 %, the drag coefficient to about 20 %.
 pub const MODEL_GAIN_UNCERTAINTY: f64 = 0.1;
+/// Range `Controller::set_model_factors` accepts for a factor: a capsule
+/// 4x off its model is a different capsule (regenerate for it).
+pub const MODEL_FACTOR_MIN: f64 = 0.25;
+pub const MODEL_FACTOR_MAX: f64 = 4.0;
+/// Range of a factor's standard deviation there: 0.1 % (a calibration's
+/// best) to 100 %.
+pub const MODEL_FACTOR_STD_MIN: f64 = 1e-3;
+pub const MODEL_FACTOR_STD_MAX: f64 = 1.0;
 pub const MODEL_DRAG_UNCERTAINTY: f64 = 0.2;
 /// Share of the model-error speed drift kept after an accepted frame (the
 /// frame corrects the position at once, the speed over a few frames).
