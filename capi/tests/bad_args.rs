@@ -202,6 +202,11 @@ fn every_handle_fn_returns(h: *mut CapsuleMpc, expected: i32) {
         assert_eq!(capsule_mpc_set_timing(h, 0.02, 0.0), expected, "set_timing");
         assert_eq!(capsule_mpc_set_shooting(h, 1), expected, "set_shooting");
         assert_eq!(
+            capsule_mpc_set_model_factors(h, 0, 1.0, 1.2, 0.01, 0.01),
+            expected,
+            "set_model_factors"
+        );
+        assert_eq!(
             capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
             expected,
             "feed_tracking"
@@ -789,5 +794,47 @@ fn next_actuation_last_status_estimate_bad_args() {
         let mut last = -1;
         assert_eq!(capsule_mpc_last_status(h, &mut last), CAPSULE_MPC_OK);
         assert_eq!(last, status);
+    }
+}
+
+#[test]
+fn set_model_factors_bad_args() {
+    let mut b = initialized();
+    let h = handle(&mut b);
+    unsafe {
+        assert_eq!(
+            capsule_mpc_set_model_factors(h, 1, 0.9, 1.2, 0.01, 0.02),
+            CAPSULE_MPC_OK
+        );
+        for (capsule, gain, drag, gs, ds, code) in [
+            (2, 1.0, 1.0, 0.01, 0.01, CAPSULE_MPC_ERR_BAD_SETTING),
+            (u32::MAX, 1.0, 1.0, 0.01, 0.01, CAPSULE_MPC_ERR_BAD_SETTING),
+            (0, f64::NAN, 1.0, 0.01, 0.01, CAPSULE_MPC_ERR_NON_FINITE),
+            (
+                0,
+                1.0,
+                f64::INFINITY,
+                0.01,
+                0.01,
+                CAPSULE_MPC_ERR_NON_FINITE,
+            ),
+            (0, 1.0, 1.0, f64::NAN, 0.01, CAPSULE_MPC_ERR_NON_FINITE),
+            (0, 0.1, 1.0, 0.01, 0.01, CAPSULE_MPC_ERR_BAD_SETTING),
+            (0, 1.0, 5.0, 0.01, 0.01, CAPSULE_MPC_ERR_BAD_SETTING),
+            (0, 1.0, -1.0, 0.01, 0.01, CAPSULE_MPC_ERR_BAD_SETTING),
+            (0, 1.0, 1.0, 0.0, 0.01, CAPSULE_MPC_ERR_BAD_SETTING),
+            (0, 1.0, 1.0, 0.01, 2.0, CAPSULE_MPC_ERR_BAD_SETTING),
+        ] {
+            assert_eq!(
+                capsule_mpc_set_model_factors(h, capsule, gain, drag, gs, ds),
+                code,
+                "capsule {capsule} factors ({gain}, {drag}) deviations ({gs}, {ds})"
+            );
+        }
+        // A refused call leaves the factors it was given before.
+        assert_eq!(
+            capsule_mpc_set_model_factors(h, 1, 0.9, 1.2, 0.01, 0.02),
+            CAPSULE_MPC_OK
+        );
     }
 }
