@@ -224,6 +224,7 @@ mod tests {
             fallback_cycles: None,
             tier_cycles: None,
             plant: None,
+            calibrated: None,
             frames: None,
             modes: None,
             estimated_factors: None,
