@@ -180,6 +180,8 @@ def simulate(
     plant_drag_scale=None,
     plant_gain_scale=None,
     shooting: Optional[bool] = None,
+    calibrated_drag_scale=None,
+    calibrated_gain_scale=None,
 ) -> Run:
     """One closed-loop run in the plant simulator, from rest at ``start``
     (positions, m; the origin when None) to ``target`` (M positions in m,
@@ -189,7 +191,9 @@ def simulate(
     None (the config's), 'none', 'once' or 'per-sample'; the plant's drag
     and gain as factors of the model's (one for all or one per capsule);
     ``shooting``: minimum-time shots on or off (None: the controller's
-    default: on).
+    default: on); ``calibrated_*_scale``: factors the controller is told at
+    the start, as a calibration gives them (1 % deviation; None: it starts
+    from the model and learns them).
     Releases the GIL while it runs. ``ValueError`` names a bad argument."""
     cfg = _config(config)
     scale = lambda s: None if s is None else [float(v) for v in np.atleast_1d(s)]
@@ -206,6 +210,8 @@ def simulate(
         scale(plant_drag_scale),
         scale(plant_gain_scale),
         None if shooting is None else bool(shooting),
+        scale(calibrated_drag_scale),
+        scale(calibrated_gain_scale),
     )
     return Run(text)
 
@@ -365,6 +371,15 @@ class Controller:
     def set_sampling(self, sampling: str) -> None:
         """'ideal', 'constant' or 'variable' (only before the loop runs)."""
         self._native.set_sampling(sampling)
+
+    def set_model_factors(
+        self, capsule: int, gain: float, drag: float, gain_std: float = 0.01, drag_std: float = 0.01
+    ) -> None:
+        """What a calibration says of capsule ``capsule``'s (0-based) gain
+        and drag against the model (factors, 1 = the model, and their
+        standard deviations); kept across ``reset``. ``ValueError`` names
+        a bad argument (factors in [0.25, 4], deviations in [0.001, 1])."""
+        self._native.set_model_factors(int(capsule), float(gain), float(drag), float(gain_std), float(drag_std))
 
     def set_target(self, target: Sequence[float]) -> None:
         """Target state [x1, 0, x2, 0, ...] (m), inside the workspace."""

@@ -157,7 +157,7 @@ fn mismatch_of(drag: Option<Vec<f64>>, gain: Option<Vec<f64>>) -> PlantMismatch 
 /// One closed-loop run: the CLI's `simulate --json` report as a string.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale, shooting))]
+#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale, shooting, calibrated_drag_scale = None, calibrated_gain_scale = None))]
 fn simulate_json(
     py: Python<'_>,
     config: &PyConfig,
@@ -172,6 +172,8 @@ fn simulate_json(
     plant_drag_scale: Option<Vec<f64>>,
     plant_gain_scale: Option<Vec<f64>>,
     shooting: Option<bool>,
+    calibrated_drag_scale: Option<Vec<f64>>,
+    calibrated_gain_scale: Option<Vec<f64>>,
 ) -> PyResult<String> {
     let mut r = SimulateRequest::new(target, "custom");
     r.shooting = shooting;
@@ -183,6 +185,9 @@ fn simulate_json(
     r.duration_s = duration_s;
     r.refine = refine.map(refine_of).transpose()?;
     r.mismatch = mismatch_of(plant_drag_scale, plant_gain_scale);
+    if calibrated_drag_scale.is_some() || calibrated_gain_scale.is_some() {
+        r.known_factors = Some(mismatch_of(calibrated_drag_scale, calibrated_gain_scale));
+    }
     let cfg = config.inner.clone();
     let report = py
         .allow_threads(|| r.run(&cfg))
@@ -419,6 +424,16 @@ impl PyController {
             Sampling::Variable => RtSampling::Variable,
         };
         each!(self, l => l.set_sampling(s)).map_err(runtime_error)
+    }
+    fn set_model_factors(
+        &mut self,
+        capsule: usize,
+        gain: f64,
+        drag: f64,
+        gain_std: f64,
+        drag_std: f64,
+    ) -> PyResult<()> {
+        each!(self, l => l.controller.set_model_factors(capsule, [gain, drag], [gain_std, drag_std]).map_err(runtime_error))
     }
     fn set_target(&mut self, target: Vec<f64>) -> PyResult<()> {
         each!(self, l => {

@@ -260,3 +260,20 @@ def test_constant_sampling_reach_reports_the_coasted_schedule_bound():
     assert on_grid.sum() == 8
     assert np.all(m.schedule_min_time_s[on_grid] > m.min_time_bound_s[on_grid])
     assert m.summary["median_settle_over_schedule_bound"] < m.summary["median_settle_over_bound"]
+
+
+def test_calibrated_factors():
+    """A calibrated capsule: the controller told its factors at the start
+    (simulate) or by the host (Controller); bad values named."""
+    run = cm.simulate([0.02, -0.01], sampling="variable", seed=1, duration_s=4.0,
+                      plant_drag_scale=1.2, calibrated_drag_scale=1.2)
+    assert run.settle_time_s is not None
+    assert json.loads(run.to_json())["calibrated"]["drag_scale"] == [1.2, 1.2]
+    c = cm.Controller()
+    c.set_model_factors(1, 0.9, 1.2, gain_std=0.01, drag_std=0.02)
+    with pytest.raises(ValueError, match="factors"):
+        c.set_model_factors(0, 1.0, 9.0)
+    with pytest.raises(ValueError, match="capsule"):
+        c.set_model_factors(5, 1.0, 1.0)
+    with pytest.raises(ValueError, match="std_devs"):
+        c.set_model_factors(0, 1.0, 1.0, drag_std=float("nan"))
