@@ -391,6 +391,13 @@ pub struct ReachArgs {
     /// (one for all or one per capsule).
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub plant_gain_scale: Option<Vec<f64>>,
+    /// Drag factors the controller is told at the start of every run, as a
+    /// calibration gives them (as `simulate --calibrated-drag-scale`).
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub calibrated_drag_scale: Option<Vec<f64>>,
+    /// Gain factors the controller is told (as above).
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub calibrated_gain_scale: Option<Vec<f64>>,
     /// Minimum-time shots (see `simulate --shooting`; default: on).
     #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,

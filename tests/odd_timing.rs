@@ -78,6 +78,7 @@ fn settles_with_delay(sampling: SimSampling, extra_delay_s: f64) -> Vec<Option<f
             duration_s: Some(10.0),
             extra_delay_s: Some(extra_delay_s),
             mismatch: Default::default(),
+            known_factors: None,
             shooting: None,
         };
         let points = reach_map(&config, &opts, &|| {}).unwrap();
@@ -146,6 +147,7 @@ fn a_gap_beyond_the_proven_range_is_refused_with_the_number() {
             duration_s: Some(1.0),
             extra_delay_s: Some(extra_delay_s),
             mismatch: Default::default(),
+            known_factors: None,
             shooting: None,
         };
         let message = format!("{:#}", reach_map(&config, &opts, &|| {}).unwrap_err());

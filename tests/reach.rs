@@ -26,6 +26,7 @@ fn reach(range_m: f64, step_m: f64, start_m: Vec<f64>) -> (Vec<ReachPoint>, Reac
         duration_s: None,
         extra_delay_s: None,
         mismatch: Default::default(),
+        known_factors: None,
         shooting: None,
     };
     let points = reach_map(&config, &opts, &|| {}).unwrap();

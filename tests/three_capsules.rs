@@ -34,6 +34,7 @@ fn ideal_reach(step_m: f64) -> (Vec<ReachPoint>, ReachSummary) {
         duration_s: Some(RUN_S),
         extra_delay_s: None,
         mismatch: Default::default(),
+        known_factors: None,
         shooting: None,
     };
     let points = reach_map(&three(), &opts, &|| {}).unwrap();

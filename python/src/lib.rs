@@ -230,6 +230,7 @@ fn reach_json(
         duration_s: None,
         extra_delay_s: None,
         mismatch: PlantMismatch::default(),
+        known_factors: None,
         shooting,
     };
     let cfg = config.inner.clone();

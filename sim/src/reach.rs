@@ -42,6 +42,9 @@ pub struct ReachOptions {
     pub extra_delay_s: Option<f64>,
     /// How the simulated capsules differ from the model (none by default).
     pub mismatch: crate::mismatch::PlantMismatch,
+    /// Factors the controller is told at the start of every run
+    /// (`RunOptions::known_factors`); None: it starts from the model.
+    pub known_factors: Option<crate::mismatch::PlantMismatch>,
     /// Minimum-time shots (`RunOptions::shooting`; None: the controller's
     /// default).
     pub shooting: Option<bool>,
@@ -192,6 +195,7 @@ pub fn reach_map(
             run_opts.seed = opts.seed;
             run_opts.duration_s = duration_s;
             run_opts.mismatch = opts.mismatch.clone();
+            run_opts.known_factors = opts.known_factors.clone();
             run_opts.shooting = opts.shooting;
             if let Some(d) = opts.extra_delay_s {
                 run_opts.extra_delay_s = d;

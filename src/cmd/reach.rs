@@ -35,9 +35,16 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         duration_s: args.duration,
         extra_delay_s: crate::cli::extra_delay_for(args.sampling, args.extra_delay)?,
         mismatch: crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale),
+        known_factors: crate::cli::calibrated(
+            &args.calibrated_drag_scale,
+            &args.calibrated_gain_scale,
+        ),
         shooting: crate::cli::shooting_choice(args.shooting, args.no_shooting),
     };
     opts.mismatch.factors(config.capsule_count())?;
+    if let Some(known) = &opts.known_factors {
+        known.factors_named(config.capsule_count(), "calibrated")?;
+    }
     let targets = capsule_mpc_sim::reach::grid_targets(
         &if opts.start_m.is_empty() {
             vec![0.0; config.capsule_count()]
