@@ -3,13 +3,13 @@
 
 use std::process::Command;
 
-#[test]
-fn bench_writes_json_with_sane_values() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("bench.json");
+/// `capsule-mpc bench ARGS --json PATH`, which must succeed: its JSON.
+fn bench_json(args: &[&str], path: &std::path::Path) -> serde_json::Value {
     let out = Command::new(env!("CARGO_BIN_EXE_capsule-mpc"))
-        .args(["bench", "--states", "2000", "--peer-states", "60", "--json"])
-        .arg(&path)
+        .arg("bench")
+        .args(args)
+        .arg("--json")
+        .arg(path)
         .output()
         .expect("run capsule-mpc");
     assert!(
@@ -18,7 +18,14 @@ fn bench_writes_json_with_sane_values() {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
+#[test]
+fn bench_writes_json_with_sane_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bench.json");
+    let v = bench_json(&["--states", "2000", "--peer-states", "60"], &path);
     assert_eq!(v["states"], 2000);
     for key in ["step_ns", "solver_ns", "step_cold_ns", "solver_cold_ns"] {
         let t = &v[key];
@@ -73,26 +80,17 @@ fn bench_times_the_three_capsule_module() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bench3.json");
     let config = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/three-capsules.toml");
-    let out = Command::new(env!("CARGO_BIN_EXE_capsule-mpc"))
-        .args([
-            "bench",
+    let v = bench_json(
+        &[
             "--config",
             config,
             "--sampling",
             "variable",
             "--states",
             "300",
-            "--json",
-        ])
-        .arg(&path)
-        .output()
-        .expect("run capsule-mpc");
-    assert!(
-        out.status.success(),
-        "bench failed: {}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
+        &path,
     );
-    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
     assert_eq!(v["capsules"], 3);
     assert_eq!(v["module"], "three_capsules");
     assert_eq!(v["sampling"], "variable");
@@ -107,6 +105,7 @@ fn bench_times_the_three_capsule_module() {
 
     let other = dir.path().join("other.toml");
     let text = std::fs::read_to_string(config).unwrap();
+    assert!(text.contains("0.47"), "the preset's drag coefficient moved");
     std::fs::write(&other, text.replacen("0.47", "0.48", 1)).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_capsule-mpc"))
         .args(["bench", "--config"])

@@ -5,15 +5,15 @@ use crate::bench::peers::run_peers;
 use crate::bench::reference::RefProblem;
 use crate::bench::states::BenchState;
 use crate::bench::tiers::measure_tiers;
-use crate::bench::timing::{fmt_us, pin_to_one_core, timed, timer_overhead_ns, Percentiles};
+use crate::bench::timing::{pin_to_one_core, print_rows, timed, timer_overhead_ns, Percentiles};
 use anyhow::Result;
 use capsule_mpc_runtime::controller::Sampling as RtSampling;
 use capsule_mpc_runtime::generated::controller::{spec, Solver};
 use capsule_mpc_runtime::generated::{qp_iteration_map, SolveReport, SolveStatus};
 use capsule_mpc_runtime::solver::PlanSolver;
-use capsule_mpc_runtime::DefaultController;
+use capsule_mpc_runtime::{Controller, DefaultController};
 use serde_json::{json, Value};
-use spec::{M, NX};
+use spec::NX;
 use std::collections::BTreeMap;
 use std::hint::black_box;
 use std::time::Instant;
@@ -44,9 +44,17 @@ pub fn prototype_controller() -> Result<DefaultController> {
 
 /// A controller with the zero target set and the given sampling mode.
 pub fn prototype_controller_with(sampling: RtSampling) -> Result<DefaultController> {
-    let mut settings = DefaultController::default_settings();
+    prototype(sampling)
+}
+
+/// A controller of any compiled module `S` with the zero target set and
+/// the given sampling mode.
+pub fn prototype<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    sampling: RtSampling,
+) -> Result<Controller<S, NX, K>> {
+    let mut settings = Controller::<S, NX, K>::default_settings();
     settings.sampling = sampling;
-    let mut c = DefaultController::new(settings, &[0.0; M])
+    let mut c = Controller::<S, NX, K>::new(settings, &[0.0; NX][..NX / 2])
         .map_err(|e| anyhow::anyhow!("controller: {e:?}"))?;
     c.set_target(&[0.0; NX])
         .map_err(|e| anyhow::anyhow!("set_target: {e:?}"))?;
@@ -190,14 +198,6 @@ pub fn measure(
         "capsule-mpc bench: {} states ({origins:?}), core {core:?}, timer overhead {overhead} ns",
         states.len()
     )?;
-    crate::out!(
-        "{:<34} {:>11} {:>11} {:>11} {:>11}",
-        "single shot",
-        "median",
-        "p99",
-        "p99.9",
-        "max"
-    )?;
     let names = [
         "controller step (warm)",
         "controller step (cold)",
@@ -214,15 +214,7 @@ pub fn measure(
                 .map(|n| format!("{n}, min of {REPEATS}"))
                 .zip(min_p),
         );
-    for (name, p) in rows {
-        crate::out!(
-            "{name:<34} {:>11} {:>11} {:>11} {:>11}",
-            fmt_us(p.median),
-            fmt_us(p.p99),
-            fmt_us(p.p999),
-            fmt_us(p.max)
-        )?;
-    }
+    print_rows(rows)?;
     crate::out!("QP iterations (max per QP, per solve): max {max_iter}, histogram {hist:?}; statuses {statuses:?}")?;
     crate::out!(
         "QP iteration map (offline, per index cell; largest entry {}): {above_map} of {} solves above their cell's count, {unmapped} in cells without one",

@@ -11,17 +11,17 @@
 //! per-state minimum reported beside the single shots. The peers and the
 //! two tiers' rows exist for the default module only.
 
-use crate::bench::harness::REPEATS;
-use crate::bench::timing::{fmt_us, pin_to_one_core, timed, timer_overhead_ns, Percentiles};
+use crate::bench::harness::{prototype, REPEATS};
+use crate::bench::states::{sample_instants, uniform_in_kept_cells};
+use crate::bench::timing::{
+    fmt_us, pin_to_one_core, print_rows, timed, timer_overhead_ns, Percentiles,
+};
 use anyhow::{Context, Result};
 use capsule_mpc_generator::config::Config;
 use capsule_mpc_runtime::controller::Sampling as RtSampling;
-use capsule_mpc_runtime::solver::lookup;
 use capsule_mpc_runtime::solver::{PlanSolver, Tables};
 use capsule_mpc_runtime::Controller;
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use serde_json::{json, Value};
 use std::hint::black_box;
 
@@ -32,21 +32,8 @@ pub const CLOSED_LOOP_SECONDS: f64 = 3.0;
 /// Target offsets of the closed-loop runs, m: capsule `i` of run `j` goes
 /// to `TARGET_OFFSETS_M[(i + j) % 3]` (a spread, a shift and a mix).
 const TARGET_OFFSETS_M: [f64; 3] = [0.02, -0.01, 0.0];
-/// Speed range of the uniformly drawn states, m/s (as the default's).
-const SAMPLED_SPEED_M_PER_S: f64 = 0.3;
-
-/// A controller of module `S` with the zero target set.
-fn prototype<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
-    sampling: RtSampling,
-) -> Result<Controller<S, NX, K>> {
-    let mut settings = Controller::<S, NX, K>::default_settings();
-    settings.sampling = sampling;
-    let mut c = Controller::<S, NX, K>::new(settings, &vec![0.0; NX / 2])
-        .map_err(|e| anyhow::anyhow!("controller: {e:?}"))?;
-    c.set_target(&[0.0; NX])
-        .map_err(|e| anyhow::anyhow!("set_target: {e:?}"))?;
-    Ok(c)
-}
+/// Untimed warm-up: states stepped before timing.
+const WARM_UP_STATES: usize = 2000;
 
 /// `n` relative states of the module (see the module docs).
 fn sample_states<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
@@ -65,38 +52,16 @@ fn sample_states<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
         opts.duration_s = CLOSED_LOOP_SECONDS;
         let report =
             run(config, &opts).with_context(|| format!("closed-loop run to {target:?} m"))?;
-        let mut last = None;
-        for (t, x) in report.t.iter().zip(&report.x) {
-            let dt_s = S::DT_S;
-            let k = (t / dt_s).round();
-            if (t - k * dt_s).abs() > 1e-9 || last == Some(k) {
-                continue;
-            }
-            last = Some(k);
-            let mut e = [0.0; NX];
-            for (ej, (xj, tj)) in e.iter_mut().zip(x.iter().zip(&target)) {
-                *ej = xj - tj;
-            }
-            states.push(e);
-        }
+        states.extend(sample_instants::<NX>(
+            &report.t,
+            &report.x,
+            &target,
+            S::DT_S,
+        ));
     }
     states.truncate(n);
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let axis = tables.index_position_axis;
-    let (p_lo, p_hi) = (axis.start, axis.start + (axis.count - 1) as f64 * axis.step);
-    while states.len() < n {
-        let mut e = [0.0; NX];
-        for (j, ej) in e.iter_mut().enumerate() {
-            *ej = if j % 2 == 0 {
-                rng.gen_range(p_lo..=p_hi)
-            } else {
-                rng.gen_range(-SAMPLED_SPEED_M_PER_S..=SAMPLED_SPEED_M_PER_S)
-            };
-        }
-        if lookup::index_cell(tables, &e).is_some() {
-            states.push(e);
-        }
-    }
+    let rest = n - states.len();
+    states.extend(uniform_in_kept_cells::<NX>(tables, rest, seed));
     Ok(states)
 }
 
@@ -135,7 +100,7 @@ where
     let core = pin_to_one_core();
     let overhead = timer_overhead_ns();
     // Untimed warm-up pass over the first states.
-    for e in states.iter().take(2000) {
+    for e in states.iter().take(WARM_UP_STATES) {
         black_box(time_state(&proto, e));
     }
     let first: Vec<(u64, u64)> = states.iter().map(|e| time_state(&proto, e)).collect();
@@ -147,53 +112,39 @@ where
             warm_min[i] = warm_min[i].min(warm);
         }
     }
+    let single =
+        |f: fn(&(u64, u64)) -> u64| Percentiles::of(&first.iter().map(f).collect::<Vec<_>>());
     let rows = [
+        ("controller step (warm)".to_string(), single(|t| t.1)),
+        ("controller step (cold)".to_string(), single(|t| t.0)),
         (
-            "controller step (warm)",
-            Percentiles::of(&first.iter().map(|t| t.1).collect::<Vec<_>>()),
-        ),
-        (
-            "controller step (cold)",
-            Percentiles::of(&first.iter().map(|t| t.0).collect::<Vec<_>>()),
-        ),
-        (
-            "controller step (warm), min of 3",
+            format!("controller step (warm), min of {REPEATS}"),
             Percentiles::of(&warm_min),
         ),
         (
-            "controller step (cold), min of 3",
+            format!("controller step (cold), min of {REPEATS}"),
             Percentiles::of(&cold_min),
         ),
     ];
-    println!(
+    crate::out!(
         "capsule-mpc bench: {} capsules, {} states, core {core:?}, timer overhead {overhead} ns (peers and tiers: the default module only)",
         NX / 2,
         states.len()
-    );
-    println!(
-        "{:<36}{:>12}{:>12}{:>12}{:>12}",
-        "single shot", "median", "p99", "p99.9", "max"
-    );
-    let mut json_rows = serde_json::Map::new();
-    for (name, p) in &rows {
-        println!(
-            "{name:<36}{:>12}{:>12}{:>12}{:>12}",
-            fmt_us(p.median),
-            fmt_us(p.p99),
-            fmt_us(p.p999),
-            fmt_us(p.max)
-        );
-        json_rows.insert(name.to_string(), p.json());
-    }
+    )?;
+    let json_rows: serde_json::Map<String, Value> = rows
+        .iter()
+        .map(|(name, p)| (name.clone(), p.json()))
+        .collect();
+    print_rows(rows)?;
     let worst = (0..states.len())
         .max_by_key(|&i| cold_min[i].max(warm_min[i]))
         .unwrap_or(0);
-    println!(
-        "slowest state (min of 3): e = {:?}: cold {}, warm {}",
+    crate::out!(
+        "slowest state (min of {REPEATS}): e = {:?}: cold {}, warm {}",
         states[worst],
         fmt_us(cold_min[worst]),
         fmt_us(warm_min[worst])
-    );
+    )?;
     Ok(json!({
         "capsules": NX / 2,
         "timer_overhead_ns": overhead,

@@ -47,6 +47,30 @@ pub(crate) fn fmt_us(ns: u64) -> String {
     format!("{:.2} us", ns as f64 / 1e3)
 }
 
+/// The timing table: a header, then one row per (name, percentiles).
+pub(crate) fn print_rows(
+    rows: impl IntoIterator<Item = (String, Percentiles)>,
+) -> std::io::Result<()> {
+    crate::out!(
+        "{:<34} {:>11} {:>11} {:>11} {:>11}",
+        "single shot",
+        "median",
+        "p99",
+        "p99.9",
+        "max"
+    )?;
+    for (name, p) in rows {
+        crate::out!(
+            "{name:<34} {:>11} {:>11} {:>11} {:>11}",
+            fmt_us(p.median),
+            fmt_us(p.p99),
+            fmt_us(p.p999),
+            fmt_us(p.max)
+        )?;
+    }
+    Ok(())
+}
+
 /// Pins the calling thread to the last core (best effort); returns its id.
 pub(crate) fn pin_to_one_core() -> Option<usize> {
     let ids = core_affinity::get_core_ids()?;

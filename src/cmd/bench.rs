@@ -68,31 +68,23 @@ fn run_module(args: &BenchArgs, path: &std::path::Path) -> Result<()> {
         module.module_name(),
         args.seed
     );
+    // One arm per compiled module: the module's solver, sizes and tables.
+    macro_rules! measure {
+        ($m:ident) => {
+            module_steps::measure::<$m::Solver, { $m::spec::NX }, { $m::spec::K }>(
+                &config,
+                &$m::TABLES,
+                sampling.runtime(),
+                args.states,
+                args.seed,
+            )
+        };
+    }
     let mut report = std::thread::scope(|scope| {
         scope
             .spawn(|| match module {
-                ControllerModule::Controller => module_steps::measure::<
-                    controller::Solver,
-                    { controller::spec::NX },
-                    { controller::spec::K },
-                >(
-                    &config,
-                    &controller::TABLES,
-                    sampling.runtime(),
-                    args.states,
-                    args.seed,
-                ),
-                ControllerModule::ThreeCapsules => module_steps::measure::<
-                    three_capsules::Solver,
-                    { three_capsules::spec::NX },
-                    { three_capsules::spec::K },
-                >(
-                    &config,
-                    &three_capsules::TABLES,
-                    sampling.runtime(),
-                    args.states,
-                    args.seed,
-                ),
+                ControllerModule::Controller => measure!(controller),
+                ControllerModule::ThreeCapsules => measure!(three_capsules),
             })
             .join()
             .map_err(|_| anyhow::anyhow!("the benchmark thread panicked"))
