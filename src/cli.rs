@@ -253,7 +253,7 @@ pub struct SimulateArgs {
     pub plant_gain_scale: Option<Vec<f64>>,
     /// Drag factors the controller is told at the start, as a calibration
     /// would give them (one for all or one per capsule; standard deviation
-    /// 1 %): `Controller::set_model_factors`. Without it the controller
+    /// 3 %): `Controller::set_model_factors`. Without it the controller
     /// starts from the model and learns them from frames.
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub calibrated_drag_scale: Option<Vec<f64>>,

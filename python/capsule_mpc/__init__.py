@@ -192,7 +192,7 @@ def simulate(
     and gain as factors of the model's (one for all or one per capsule);
     ``shooting``: minimum-time shots on or off (None: the controller's
     default: on); ``calibrated_*_scale``: factors the controller is told at
-    the start, as a calibration gives them (1 % deviation; None: it starts
+    the start, as a calibration gives them (3 % deviation; None: it starts
     from the model and learns them).
     Releases the GIL while it runs. ``ValueError`` names a bad argument."""
     cfg = _config(config)
