@@ -260,6 +260,10 @@ pub struct SimulateArgs {
     /// Gain factors the controller is told at the start (as above).
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub calibrated_gain_scale: Option<Vec<f64>>,
+    /// Standard deviation of the told factors, as a fraction (default
+    /// 0.03): how far the calibration may be off.
+    #[arg(long, value_name = "FRACTION")]
+    pub calibrated_std: Option<f64>,
     #[arg(long, value_enum, default_value = "variable")]
     pub sampling: SamplingArg,
     #[arg(long, value_enum, default_value = "paper")]
@@ -398,6 +402,9 @@ pub struct ReachArgs {
     /// Gain factors the controller is told (as above).
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub calibrated_gain_scale: Option<Vec<f64>>,
+    /// Standard deviation of the told factors (as `simulate --calibrated-std`).
+    #[arg(long, value_name = "FRACTION")]
+    pub calibrated_std: Option<f64>,
     /// Minimum-time shots (see `simulate --shooting`; default: on).
     #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,
@@ -613,6 +620,24 @@ impl From<SwitchingArg> for capsule_mpc_runtime::controller::SwitchingRule {
             SwitchingArg::Tight => capsule_mpc_runtime::controller::SwitchingRule::Tight,
             SwitchingArg::Paper => capsule_mpc_runtime::controller::SwitchingRule::Paper,
         }
+    }
+}
+
+/// The standard deviation of `--calibrated-std` (the default when absent),
+/// refused without the factors it qualifies.
+pub fn calibrated_std(
+    known: &Option<capsule_mpc_sim::mismatch::PlantMismatch>,
+    std: Option<f64>,
+) -> anyhow::Result<f64> {
+    match (known, std) {
+        (None, Some(s)) => anyhow::bail!(
+            "--calibrated-std {s} needs the factors it qualifies: --calibrated-drag-scale or --calibrated-gain-scale"
+        ),
+        (_, Some(s)) => {
+            capsule_mpc_sim::closed_loop::check_known_factor_std(s)?;
+            Ok(s)
+        }
+        (_, None) => Ok(capsule_mpc_sim::closed_loop::KNOWN_FACTOR_STD),
     }
 }
 

@@ -79,6 +79,7 @@ fn settles_with_delay(sampling: SimSampling, extra_delay_s: f64) -> Vec<Option<f
             extra_delay_s: Some(extra_delay_s),
             mismatch: Default::default(),
             known_factors: None,
+            known_factor_std: capsule_mpc_sim::closed_loop::KNOWN_FACTOR_STD,
             shooting: None,
         };
         let points = reach_map(&config, &opts, &|| {}).unwrap();
@@ -148,6 +149,7 @@ fn a_gap_beyond_the_proven_range_is_refused_with_the_number() {
             extra_delay_s: Some(extra_delay_s),
             mismatch: Default::default(),
             known_factors: None,
+            known_factor_std: capsule_mpc_sim::closed_loop::KNOWN_FACTOR_STD,
             shooting: None,
         };
         let message = format!("{:#}", reach_map(&config, &opts, &|| {}).unwrap_err());

@@ -27,6 +27,7 @@ fn reach(range_m: f64, step_m: f64, start_m: Vec<f64>) -> (Vec<ReachPoint>, Reac
         extra_delay_s: None,
         mismatch: Default::default(),
         known_factors: None,
+        known_factor_std: capsule_mpc_sim::closed_loop::KNOWN_FACTOR_STD,
         shooting: None,
     };
     let points = reach_map(&config, &opts, &|| {}).unwrap();

@@ -35,6 +35,7 @@ fn ideal_reach(step_m: f64) -> (Vec<ReachPoint>, ReachSummary) {
         extra_delay_s: None,
         mismatch: Default::default(),
         known_factors: None,
+        known_factor_std: capsule_mpc_sim::closed_loop::KNOWN_FACTOR_STD,
         shooting: None,
     };
     let points = reach_map(&three(), &opts, &|| {}).unwrap();

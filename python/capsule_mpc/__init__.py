@@ -182,6 +182,7 @@ def simulate(
     shooting: Optional[bool] = None,
     calibrated_drag_scale=None,
     calibrated_gain_scale=None,
+    calibrated_std: Optional[float] = None,
 ) -> Run:
     """One closed-loop run in the plant simulator, from rest at ``start``
     (positions, m; the origin when None) to ``target`` (M positions in m,
@@ -192,8 +193,9 @@ def simulate(
     and gain as factors of the model's (one for all or one per capsule);
     ``shooting``: minimum-time shots on or off (None: the controller's
     default: on); ``calibrated_*_scale``: factors the controller is told at
-    the start, as a calibration gives them (3 % deviation; None: it starts
-    from the model and learns them).
+    the start, as a calibration gives them (None: it starts from the model
+    and learns them), with standard deviation ``calibrated_std`` (a
+    fraction; None: 0.03).
     Releases the GIL while it runs. ``ValueError`` names a bad argument."""
     cfg = _config(config)
     scale = lambda s: None if s is None else [float(v) for v in np.atleast_1d(s)]
@@ -212,6 +214,7 @@ def simulate(
         None if shooting is None else bool(shooting),
         scale(calibrated_drag_scale),
         scale(calibrated_gain_scale),
+        None if calibrated_std is None else float(calibrated_std),
     )
     return Run(text)
 
@@ -268,12 +271,18 @@ def reach(
     disturbance: str = "none",
     seed: int = 1,
     shooting: Optional[bool] = None,
+    plant_drag_scale=None,
+    plant_gain_scale=None,
+    calibrated_drag_scale=None,
+    calibrated_gain_scale=None,
+    calibrated_std: Optional[float] = None,
 ) -> ReachMap:
     """The closed loop from rest at the origin to every target of the grid
     (``range_cm`` half-width, ``step_cm`` spacing, per capsule) on both
-    cores; releases the GIL and prints nothing. ``shooting`` as for
-    ``simulate``."""
+    cores; releases the GIL and prints nothing. ``shooting``, the plant's
+    factors and the told (calibrated) ones as for ``simulate``."""
     cfg = _config(config)
+    scale = lambda s: None if s is None else [float(v) for v in np.atleast_1d(s)]
     text = _native.reach_json(
         cfg._native,
         float(range_cm),
@@ -282,6 +291,11 @@ def reach(
         disturbance,
         int(seed),
         None if shooting is None else bool(shooting),
+        scale(plant_drag_scale),
+        scale(plant_gain_scale),
+        scale(calibrated_drag_scale),
+        scale(calibrated_gain_scale),
+        None if calibrated_std is None else float(calibrated_std),
     )
     half = int(np.floor(range_cm / step_cm + 1e-9))
     return ReachMap(text, np.arange(-half, half + 1) * float(step_cm))

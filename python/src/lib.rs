@@ -154,10 +154,34 @@ fn mismatch_of(drag: Option<Vec<f64>>, gain: Option<Vec<f64>>) -> PlantMismatch 
     }
 }
 
+/// The told factors and their standard deviation (the default when None);
+/// a deviation without factors is refused, as on the CLI.
+fn known_of(
+    drag: Option<Vec<f64>>,
+    gain: Option<Vec<f64>>,
+    std: Option<f64>,
+) -> PyResult<(Option<PlantMismatch>, f64)> {
+    let known = (drag.is_some() || gain.is_some()).then(|| mismatch_of(drag, gain));
+    let std = match (&known, std) {
+        (None, Some(s)) => {
+            return Err(value_error(format!(
+                "calibrated_std {s} needs the factors it qualifies: calibrated_drag_scale or calibrated_gain_scale"
+            )))
+        }
+        (_, Some(s)) => {
+            capsule_mpc_sim::closed_loop::check_known_factor_std(s)
+                .map_err(|e| value_error(format!("{e:#}")))?;
+            s
+        }
+        (_, None) => capsule_mpc_sim::closed_loop::KNOWN_FACTOR_STD,
+    };
+    Ok((known, std))
+}
+
 /// One closed-loop run: the CLI's `simulate --json` report as a string.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale, shooting, calibrated_drag_scale = None, calibrated_gain_scale = None))]
+#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale, shooting, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None))]
 fn simulate_json(
     py: Python<'_>,
     config: &PyConfig,
@@ -174,6 +198,7 @@ fn simulate_json(
     shooting: Option<bool>,
     calibrated_drag_scale: Option<Vec<f64>>,
     calibrated_gain_scale: Option<Vec<f64>>,
+    calibrated_std: Option<f64>,
 ) -> PyResult<String> {
     let mut r = SimulateRequest::new(target, "custom");
     r.shooting = shooting;
@@ -185,9 +210,8 @@ fn simulate_json(
     r.duration_s = duration_s;
     r.refine = refine.map(refine_of).transpose()?;
     r.mismatch = mismatch_of(plant_drag_scale, plant_gain_scale);
-    if calibrated_drag_scale.is_some() || calibrated_gain_scale.is_some() {
-        r.known_factors = Some(mismatch_of(calibrated_drag_scale, calibrated_gain_scale));
-    }
+    (r.known_factors, r.known_factor_std) =
+        known_of(calibrated_drag_scale, calibrated_gain_scale, calibrated_std)?;
     let cfg = config.inner.clone();
     let report = py
         .allow_threads(|| r.run(&cfg))
@@ -197,7 +221,7 @@ fn simulate_json(
 
 /// The reach map: `{"points": [...], "summary": {...}}` as the CLI's JSON.
 #[pyfunction]
-#[pyo3(signature = (config, range_cm, step_cm, sampling, disturbance, seed, shooting))]
+#[pyo3(signature = (config, range_cm, step_cm, sampling, disturbance, seed, shooting, plant_drag_scale = None, plant_gain_scale = None, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None))]
 #[allow(clippy::too_many_arguments)]
 fn reach_json(
     py: Python<'_>,
@@ -208,6 +232,11 @@ fn reach_json(
     disturbance: &str,
     seed: u64,
     shooting: Option<bool>,
+    plant_drag_scale: Option<Vec<f64>>,
+    plant_gain_scale: Option<Vec<f64>>,
+    calibrated_drag_scale: Option<Vec<f64>>,
+    calibrated_gain_scale: Option<Vec<f64>>,
+    calibrated_std: Option<f64>,
 ) -> PyResult<String> {
     if !(range_cm.is_finite() && range_cm >= 0.0) {
         return Err(value_error(format!(
@@ -219,6 +248,8 @@ fn reach_json(
             "step_cm {step_cm} must be a finite number > 0"
         )));
     }
+    let (known_factors, known_factor_std) =
+        known_of(calibrated_drag_scale, calibrated_gain_scale, calibrated_std)?;
     let opts = ReachOptions {
         range_m: range_cm / 100.0,
         step_m: step_cm / 100.0,
@@ -229,8 +260,9 @@ fn reach_json(
         start_m: Vec::new(),
         duration_s: None,
         extra_delay_s: None,
-        mismatch: PlantMismatch::default(),
-        known_factors: None,
+        mismatch: mismatch_of(plant_drag_scale, plant_gain_scale),
+        known_factors,
+        known_factor_std,
         shooting,
     };
     let cfg = config.inner.clone();

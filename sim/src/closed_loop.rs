@@ -228,6 +228,19 @@ pub fn check_duration(duration_s: f64) -> Result<()> {
     Ok(())
 }
 
+/// A told factor's standard deviation must be a fraction within the
+/// runtime's `[MODEL_FACTOR_STD_MIN, MODEL_FACTOR_STD_MAX]` (its own error
+/// would only name the argument); the error says the value and the range.
+pub fn check_known_factor_std(std: f64) -> Result<()> {
+    use capsule_mpc_runtime::controller::{MODEL_FACTOR_STD_MAX, MODEL_FACTOR_STD_MIN};
+    if !(MODEL_FACTOR_STD_MIN..=MODEL_FACTOR_STD_MAX).contains(&std) {
+        bail!(
+            "calibrated std {std} is outside [{MODEL_FACTOR_STD_MIN}, {MODEL_FACTOR_STD_MAX}] (a fraction of the factor: 0.03 is 3 %)"
+        );
+    }
+    Ok(())
+}
+
 /// The extra delay after each tracking phase must lie in
 /// `[0, MAX_EXTRA_DELAY_S]` s, the runtime's range (its error would only
 /// name the setting); the error says the value and the range.
@@ -365,6 +378,7 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     if let Some(known) = &opts.known_factors {
         let (drag, gain) = known.factors_named(NX / 2, "calibrated")?;
         let std = opts.known_factor_std;
+        check_known_factor_std(std)?;
         for i in 0..NX / 2 {
             ctl.set_model_factors(i, [gain[i], drag[i]], [std, std])
                 .map_err(|e| anyhow::anyhow!("calibrated factors of capsule {}: {e:?}", i + 1))?;

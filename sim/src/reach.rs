@@ -45,6 +45,8 @@ pub struct ReachOptions {
     /// Factors the controller is told at the start of every run
     /// (`RunOptions::known_factors`); None: it starts from the model.
     pub known_factors: Option<crate::mismatch::PlantMismatch>,
+    /// Their standard deviation (`RunOptions::known_factor_std`).
+    pub known_factor_std: f64,
     /// Minimum-time shots (`RunOptions::shooting`; None: the controller's
     /// default).
     pub shooting: Option<bool>,
@@ -186,6 +188,9 @@ pub fn reach_map(
     if let Some(d) = opts.extra_delay_s {
         crate::closed_loop::check_extra_delay(config, d)?;
     }
+    if opts.known_factors.is_some() {
+        crate::closed_loop::check_known_factor_std(opts.known_factor_std)?;
+    }
     let points = targets
         .par_iter()
         .map(|t| {
@@ -196,6 +201,7 @@ pub fn reach_map(
             run_opts.duration_s = duration_s;
             run_opts.mismatch = opts.mismatch.clone();
             run_opts.known_factors = opts.known_factors.clone();
+            run_opts.known_factor_std = opts.known_factor_std;
             run_opts.shooting = opts.shooting;
             if let Some(d) = opts.extra_delay_s {
                 run_opts.extra_delay_s = d;

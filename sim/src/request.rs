@@ -41,6 +41,8 @@ pub struct SimulateRequest {
     /// Factors the controller is told at the start (see
     /// `RunOptions::known_factors`).
     pub known_factors: Option<PlantMismatch>,
+    /// Their standard deviation (`RunOptions::known_factor_std`).
+    pub known_factor_std: f64,
 }
 
 impl SimulateRequest {
@@ -66,6 +68,7 @@ impl SimulateRequest {
             extra_delay_s: None,
             mismatch: PlantMismatch::default(),
             known_factors: None,
+            known_factor_std: crate::closed_loop::KNOWN_FACTOR_STD,
         }
     }
 
@@ -97,6 +100,7 @@ impl SimulateRequest {
         self.mismatch.factors(m)?;
         if let Some(known) = &self.known_factors {
             known.factors_named(m, "calibrated")?;
+            crate::closed_loop::check_known_factor_std(self.known_factor_std)?;
         }
         let mut opts = RunOptions::new(config, self.target.clone(), self.sampling);
         opts.start_m = self.start_m.clone();
@@ -113,6 +117,7 @@ impl SimulateRequest {
         opts.shooting = self.shooting;
         opts.mismatch = self.mismatch.clone();
         opts.known_factors = self.known_factors.clone();
+        opts.known_factor_std = self.known_factor_std;
         if let Some(r) = self.refine {
             opts.refine = r;
         }

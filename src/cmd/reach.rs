@@ -24,6 +24,9 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         Sampling::from(args.sampling),
         DisturbanceLevel::from(args.disturbance),
     );
+    let known_factors =
+        crate::cli::calibrated(&args.calibrated_drag_scale, &args.calibrated_gain_scale);
+    let known_factor_std = crate::cli::calibrated_std(&known_factors, args.calibrated_std)?;
     let opts = ReachOptions {
         range_m: args.range_cm / 100.0,
         step_m: args.step_cm / 100.0,
@@ -35,10 +38,8 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         duration_s: args.duration,
         extra_delay_s: crate::cli::extra_delay_for(args.sampling, args.extra_delay)?,
         mismatch: crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale),
-        known_factors: crate::cli::calibrated(
-            &args.calibrated_drag_scale,
-            &args.calibrated_gain_scale,
-        ),
+        known_factors,
+        known_factor_std,
         shooting: crate::cli::shooting_choice(args.shooting, args.no_shooting),
     };
     opts.mismatch.factors(config.capsule_count())?;
