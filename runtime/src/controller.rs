@@ -1,7 +1,7 @@
 //! The scanner-cycle controller: estimator + generated solver + switching
 //! rule + fault handling, in one fixed-size struct.
 
-use crate::estimator::{CapsuleFilter, ScaleEstimate};
+use crate::estimator::{CapsuleFilter, ScaleEstimate, INITIAL_SPEED_STD_M_PER_S};
 use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
     PaperConstants, TightInputs,
@@ -124,6 +124,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         for (i, &p) in positions_m.iter().enumerate() {
             self.est.filters[i] = CapsuleFilter::new(p, std);
         }
+        self.est.at_start = true;
+        self.seed_start_speeds();
         self.est.gated_rejections = 0;
         self.est.model_drift = [[0.0; 2]; NX];
         self.est.candidate_frames = 0;
@@ -281,7 +283,29 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             std_devs[1] * std_devs[1],
         ];
         self.refresh_applied_scales();
+        if self.est.at_start {
+            self.seed_start_speeds();
+        }
         Ok(())
+    }
+
+    /// The speed uncertainty of capsules at rest at the start: what the
+    /// gain's uncertainty puts into the first full-gradient sample
+    /// (`INITIAL_SPEED_STD_M_PER_S` under the model's 10 % prior), so that
+    /// the first frames correct the speed as much as the model may be off
+    /// and no more. A calibrated gain (1 %) trusts the model's speeds that
+    /// much more: frame noise (0.2 mm, tens of ms apart) otherwise puts
+    /// about 1 mm/s of relative speed into the first arrival, which the
+    /// hold cannot remove (docs/decisions.md).
+    fn seed_start_speeds(&mut self) {
+        for i in 0..NX / 2 {
+            let gain_std = libm::sqrt(self.est.scales[i].cov[0].max(0.0));
+            let share = (gain_std / MODEL_GAIN_UNCERTAINTY).min(1.0);
+            let f = &mut self.est.filters[i];
+            f.cov[1] = 0.0;
+            f.cov[2] = 0.0;
+            f.cov[3] = sq(INITIAL_SPEED_STD_M_PER_S * share);
+        }
     }
 
     /// Sets a new target `[x1, v1, x2, v2, ...]`: positions inside the
@@ -329,6 +353,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && libm::fabs(x[2 * i + 1]) <= MAX_ABS_SPEED_M_PER_S
         });
         let played = self.est.full_state_gradient.take();
+        self.est.at_start = false;
         if !physical {
             let kept = self.estimate();
             return Ok(self.plan_from(&kept, RuntimeStatus::MeasurementRejected, 1));

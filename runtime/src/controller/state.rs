@@ -86,6 +86,9 @@ pub(super) struct Estimation<const NX: usize> {
     /// Ideal sampling: the gradient played since the last full state, T/m
     /// (None before the first one, after `reset` and after a rejected one).
     pub full_state_gradient: Option<f64>,
+    /// The capsules are at rest where the last `reset` put them (no cycle
+    /// since): told factors then also set the speeds' uncertainty.
+    pub at_start: bool,
 }
 
 impl<const NX: usize> Estimation<NX> {
@@ -104,6 +107,7 @@ impl<const NX: usize> Estimation<NX> {
             actuation_end_s: None,
             gap_s,
             full_state_gradient: None,
+            at_start: false,
         }
     }
 }

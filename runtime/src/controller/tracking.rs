@@ -114,6 +114,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         wait_s: f64,
         gap: (f64, bool),
     ) -> CycleOutput<K> {
+        self.est.at_start = false;
         if before_s > 0.0 {
             self.predict_filters(0.0, before_s);
         }
