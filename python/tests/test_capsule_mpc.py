@@ -277,3 +277,24 @@ def test_calibrated_factors():
         c.set_model_factors(5, 1.0, 1.0)
     with pytest.raises(ValueError, match="std_devs"):
         c.set_model_factors(0, 1.0, 1.0, drag_std=float("nan"))
+
+
+def test_calibrated_std_and_reach_on_a_plant_off_the_model():
+    """The told factors' deviation is an argument of simulate and reach;
+    reach runs on a plant off the model, told or not; bad values named."""
+    run = cm.simulate([0.0, 0.01], sampling="variable", seed=6, duration_s=3.0,
+                      calibrated_gain_scale=1.0, calibrated_std=0.01)
+    assert json.loads(run.to_json())["calibrated"]["std"] == 0.01
+    # The (0, 1) cm differential move of seed 6: 2.07 s with the speeds as
+    # uncertain as the model's prior; a 1 % calibration arrives at rest.
+    assert run.settle_time_s < 0.5
+    plain = cm.reach(range_cm=1.0, step_cm=1.0, sampling="variable", disturbance="paper",
+                     plant_drag_scale=1.2)
+    told = cm.reach(range_cm=1.0, step_cm=1.0, sampling="variable", disturbance="paper",
+                    plant_drag_scale=1.2, calibrated_drag_scale=1.2)
+    assert plain.summary["targets"] == told.summary["targets"] == 8
+    assert not np.array_equal(plain.settle_time_s, told.settle_time_s, equal_nan=True)
+    with pytest.raises(ValueError, match="calibrated std"):
+        cm.simulate([0.02, -0.01], calibrated_drag_scale=1.0, calibrated_std=2.0)
+    with pytest.raises(ValueError, match="needs the factors"):
+        cm.reach(range_cm=1.0, calibrated_std=0.01)
