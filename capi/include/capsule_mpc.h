@@ -226,7 +226,11 @@ int32_t capsule_mpc_set_shooting(capsule_mpc_t *handle, int32_t on);
  * model, e.g. from `capsule-mpc calibrate`: factors (1 = the model) and
  * their standard deviations. They replace the estimate; the plans use them
  * at once where they differ from the model significantly, and the frames
- * keep refining them; kept across capsule_mpc_reset. BAD_SETTING for a
+ * keep refining them; kept across capsule_mpc_reset. Called before the
+ * first cycle (after create or reset), the gain's deviation also sets how
+ * sure the estimator is of the capsules' starting speeds: 1 % makes the
+ * short moves' first arrivals much more precise (docs/calibrate.md); tell
+ * a deviation about a third of the factor's possible error. BAD_SETTING for a
  * capsule beyond the count, a factor outside [0.25, 4] or a deviation
  * outside [0.001, 1]; NON_FINITE for NaN or infinity. */
 int32_t capsule_mpc_set_model_factors(capsule_mpc_t *handle, uint32_t capsule,

@@ -387,12 +387,16 @@ class Controller:
         self._native.set_sampling(sampling)
 
     def set_model_factors(
-        self, capsule: int, gain: float, drag: float, gain_std: float = 0.01, drag_std: float = 0.01
+        self, capsule: int, gain: float, drag: float, gain_std: float = 0.03, drag_std: float = 0.03
     ) -> None:
         """What a calibration says of capsule ``capsule``'s (0-based) gain
         and drag against the model (factors, 1 = the model, and their
-        standard deviations); kept across ``reset``. ``ValueError`` names
-        a bad argument (factors in [0.25, 4], deviations in [0.001, 1])."""
+        standard deviations, 3 % by default as in ``simulate``: tell 1 %
+        only for a capsule known within 2-3 %); kept across ``reset``.
+        Before the loop runs (or after ``reset``) the gain's deviation also
+        sets how sure the estimator is of the starting speeds.
+        ``ValueError`` names a bad argument (factors in [0.25, 4],
+        deviations in [0.001, 1])."""
         self._native.set_model_factors(int(capsule), float(gain), float(drag), float(gain_std), float(drag_std))
 
     def set_target(self, target: Sequence[float]) -> None:

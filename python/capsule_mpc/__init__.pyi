@@ -64,6 +64,7 @@ def simulate(
     shooting: Optional[bool] = ...,
     calibrated_drag_scale: Optional[object] = ...,
     calibrated_gain_scale: Optional[object] = ...,
+    calibrated_std: Optional[float] = ...,
 ) -> Run: ...
 
 class ReachMap:
@@ -90,6 +91,11 @@ def reach(
     disturbance: str = ...,
     seed: int = ...,
     shooting: Optional[bool] = ...,
+    plant_drag_scale: Optional[object] = ...,
+    plant_gain_scale: Optional[object] = ...,
+    calibrated_drag_scale: Optional[object] = ...,
+    calibrated_gain_scale: Optional[object] = ...,
+    calibrated_std: Optional[float] = ...,
 ) -> ReachMap: ...
 
 class Calibration:

@@ -246,7 +246,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// frames keep refining them. Without it the estimator starts from the
     /// model and learns the factors from frames, which under variable
     /// sampling arrive late (docs/known-limits.md). Kept across `reset` and
-    /// new targets.
+    /// new targets. Before the first cycle (after `new` or `reset`) the
+    /// gain's deviation also sets the starting speeds' uncertainty (see
+    /// `seed_start_speeds`).
     pub fn set_model_factors(
         &mut self,
         capsule: usize,
