@@ -7,8 +7,8 @@
 //! Asserted: every run settles, and the median is at most 1.3 x the
 //! nominal plant's (issue 26's floor, which the uncalibrated loop misses
 //! under variable sampling: `mismatch.rs`). Measured on the 24-target
-//! grid, seeds 1-8: variable medians 1.06-1.29 s against 1.00 s, constant
-//! 1.16-1.43 s against 1.18 s (docs/calibrate.md).
+//! grid, seeds 1-8: variable medians 1.05-1.22 s against 1.00 s, constant
+//! 1.16-1.37 s against 1.18 s (docs/calibrate.md).
 //!
 //! And the short moves of the 1 cm reach grid with a 1 % calibration, on
 //! the model and on a plant 3 % off it (three of its deviations): see
