@@ -39,6 +39,15 @@ const SPEED_SCALE_M_PER_S: f64 = 1.0e-2;
 /// Relative step of the finite-difference Jacobian (scaled parameters).
 const JACOBIAN_STEP: f64 = 1.0e-6;
 
+/// The deviation suggested for telling a fitted factor to a controller
+/// built for the config (`CapsuleFit::told_std`): this many of the fit's
+/// relative standard errors (the told value then covers the fit's own 3
+/// sigma within one deviation) ...
+pub const TOLD_STD_PER_STDERR: f64 = 3.0;
+/// ... and at least 1 %: a told factor 2-3 % off the truth with a 1 %
+/// deviation already costs far moves time (docs/calibrate.md).
+pub const TOLD_STD_MIN: f64 = 0.01;
+
 /// One capsule's fitted constants (SI), with standard errors and 95 %
 /// intervals, and the config's values for comparison.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -60,6 +69,25 @@ pub struct CapsuleFit {
     pub v0_m_per_s: f64,
     pub measurements: usize,
     pub residual_rms_m: f64,
+    /// What to tell a controller built for the config without
+    /// regenerating (`Controller::set_model_factors`): the [gain, drag]
+    /// factors over the config's values ...
+    #[serde(default)]
+    pub told_factors: [f64; 2],
+    /// ... and their deviations ([`TOLD_STD_PER_STDERR`] relative standard
+    /// errors, at least [`TOLD_STD_MIN`], at most 1).
+    #[serde(default)]
+    pub told_std: [f64; 2],
+}
+
+/// The deviation to tell for a factor fitted with relative standard error
+/// `relative_stderr` (1 where the log did not identify it).
+pub fn told_std(relative_stderr: f64) -> f64 {
+    if relative_stderr.is_finite() {
+        (TOLD_STD_PER_STDERR * relative_stderr).clamp(TOLD_STD_MIN, 1.0)
+    } else {
+        1.0
+    }
 }
 
 /// What `calibrate` reports (`--json`).
@@ -256,6 +284,11 @@ pub fn fit(
             v0_m_per_s: p[3] * SPEED_SCALE_M_PER_S,
             measurements: n,
             residual_rms_m: (ssr / n as f64).sqrt(),
+            told_factors: [p[0], p[1]],
+            told_std: [
+                told_std(cov[(0, 0)].max(0.0).sqrt()),
+                told_std(cov[(1, 1)].max(0.0).sqrt()),
+            ],
         });
     }
     Ok(Calibration {

@@ -18,5 +18,8 @@ pub mod fit;
 pub mod log;
 
 pub use design::{design_excitation, Excitation};
-pub use fit::{fit, fitted_config, Calibration, CapsuleFit, FitSettings};
+pub use fit::{
+    fit, fitted_config, told_std, Calibration, CapsuleFit, FitSettings, TOLD_STD_MIN,
+    TOLD_STD_PER_STDERR,
+};
 pub use log::{LogError, TrackingLog};

@@ -4,7 +4,9 @@
 //! fitted constant within 2 % of the plant's and its 95 % interval
 //! covering it (over several seeds; the worst printed).
 
-use capsule_mpc_calibrate::{design_excitation, fit, fitted_config, FitSettings, TrackingLog};
+use capsule_mpc_calibrate::{
+    design_excitation, fit, fitted_config, FitSettings, TrackingLog, TOLD_STD_MIN,
+};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig};
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_sim::mismatch::PlantMismatch;
@@ -109,6 +111,23 @@ fn fitted_constants_are_within_2_percent_and_covered() {
                     f.drag,
                     f.drag_stderr
                 );
+                // What to tell a controller built for the config: the
+                // factors over the config's values, their deviations at
+                // least 1 % and covering the plant's true factor.
+                let model_i = &model.capsules[i];
+                let true_factors = [
+                    truth_g / model_i.g,
+                    truth_b / model_i.drag.effective_b_per_m(0.1),
+                ];
+                for k in 0..2 {
+                    let (told, std) = (f.told_factors[k], f.told_std[k]);
+                    assert!(
+                        (TOLD_STD_MIN..=1.0).contains(&std)
+                            && (told - true_factors[k]).abs() <= std,
+                        "capsule {i} seed {seed}: told {told} +- {std}, truth {}",
+                        true_factors[k]
+                    );
+                }
                 covered += (f.gain_ci95[0] <= truth_g && truth_g <= f.gain_ci95[1]) as usize
                     + (f.drag_ci95[0] <= truth_b && truth_b <= f.drag_ci95[1]) as usize;
                 intervals += 2;

@@ -14,6 +14,39 @@ use capsule_mpc_pulseq::{write_sequence_file, ActuationSample, PlayedRun, Tracki
 use capsule_mpc_sim::plant::{Phase, Plant};
 use capsule_mpc_sim::report::write_json_atomic;
 
+/// How to tell a controller built for the config what the fit found,
+/// without regenerating: the simulator's flags (one deviation for all, the
+/// largest) or, beyond the runtime's factor range, regenerate.
+fn tell_line(cal: &capsule_mpc_calibrate::Calibration) -> String {
+    use capsule_mpc_runtime::controller::{MODEL_FACTOR_MAX, MODEL_FACTOR_MIN};
+    let factors = |k: usize| -> Vec<String> {
+        cal.capsules
+            .iter()
+            .map(|c| format!("{:.4}", c.told_factors[k]))
+            .collect()
+    };
+    let in_range = cal.capsules.iter().all(|c| {
+        c.told_factors
+            .iter()
+            .all(|f| (MODEL_FACTOR_MIN..=MODEL_FACTOR_MAX).contains(f))
+    });
+    if !in_range {
+        return format!(
+            "a factor is outside [{MODEL_FACTOR_MIN}, {MODEL_FACTOR_MAX}] of the config's values: regenerate for the fitted capsules (--out)"
+        );
+    }
+    let std = cal
+        .capsules
+        .iter()
+        .flat_map(|c| c.told_std)
+        .fold(0.0, f64::max);
+    format!(
+        "tell the controller without regenerating: --calibrated-gain-scale {} --calibrated-drag-scale {} --calibrated-std {std:.3} (simulate, reach; set_model_factors per capsule: docs/calibrate.md)",
+        factors(0).join(","),
+        factors(1).join(","),
+    )
+}
+
 pub fn run(args: &CalibrateArgs) -> Result<()> {
     let config = load_config(args.config.as_deref())?;
     if args.design {
@@ -56,6 +89,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         1e3 * cal.residual_rms_m,
         cal.drag_law
     )?;
+    crate::out!("{}", tell_line(&cal))?;
     for w in &cal.warnings {
         eprintln!("warning: {w}");
     }
