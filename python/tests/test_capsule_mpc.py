@@ -245,6 +245,15 @@ def test_calibrate_recovers_an_off_model_plant():
     assert np.all(np.abs(cal.gain / g - 1) < 0.02) and np.all(np.abs(cal.drag / b - 1) < 0.02)
     assert cal.warnings == [] and cal.residual_rms_m < 3e-4
     assert np.allclose(cal.fitted_config.g, cal.gain) and np.allclose(cal.fitted_config.b, cal.drag)
+    # What to tell a controller built for cfg: factors over its values,
+    # deviations that cover the plant's true factors.
+    truth = np.stack([g / cfg.g, b / cfg.b], axis=1)
+    told = np.array([c["told_factors"] for c in cal.capsules])
+    std = np.array([c["told_std"] for c in cal.capsules])
+    assert np.all(std >= 0.01) and np.all(np.abs(told - truth) <= std)
+    c = cm.Controller(cfg)
+    for i in range(2):
+        c.set_model_factors(i, told[i, 0], told[i, 1], gain_std=std[i, 0], drag_std=std[i, 1])
 
 
 def test_calibrate_refuses_a_malformed_log(tmp_path):
