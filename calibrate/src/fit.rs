@@ -40,8 +40,8 @@ const SPEED_SCALE_M_PER_S: f64 = 1.0e-2;
 const JACOBIAN_STEP: f64 = 1.0e-6;
 
 /// The deviation suggested for telling a fitted factor to a controller
-/// built for the config (`CapsuleFit::told_std`): this many of the fit's
-/// relative standard errors (the told value then covers the fit's own 3
+/// built for the config (`CapsuleFit::told_std`): this many of the
+/// factor's standard errors (the told value then covers the fit's own 3
 /// sigma within one deviation) ...
 pub const TOLD_STD_PER_STDERR: f64 = 3.0;
 /// ... and at least 1 %: a told factor 2-3 % off the truth with a 1 %
@@ -74,17 +74,18 @@ pub struct CapsuleFit {
     /// factors over the config's values ...
     #[serde(default)]
     pub told_factors: [f64; 2],
-    /// ... and their deviations ([`TOLD_STD_PER_STDERR`] relative standard
-    /// errors, at least [`TOLD_STD_MIN`], at most 1).
+    /// ... and their deviations ([`TOLD_STD_PER_STDERR`] of the factor's
+    /// standard errors, at least [`TOLD_STD_MIN`], at most 1).
     #[serde(default)]
     pub told_std: [f64; 2],
 }
 
-/// The deviation to tell for a factor fitted with relative standard error
-/// `relative_stderr` (1 where the log did not identify it).
-pub fn told_std(relative_stderr: f64) -> f64 {
-    if relative_stderr.is_finite() {
-        (TOLD_STD_PER_STDERR * relative_stderr).clamp(TOLD_STD_MIN, 1.0)
+/// The deviation to tell for a factor (fitted value over the config's)
+/// fitted with standard error `factor_stderr` (1 where the log did not
+/// identify it).
+pub fn told_std(factor_stderr: f64) -> f64 {
+    if factor_stderr.is_finite() {
+        (TOLD_STD_PER_STDERR * factor_stderr).clamp(TOLD_STD_MIN, 1.0)
     } else {
         1.0
     }
