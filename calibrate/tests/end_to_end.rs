@@ -119,13 +119,11 @@ fn fitted_constants_are_within_2_percent_and_covered() {
                     truth_g / model_i.g,
                     truth_b / model_i.drag.effective_b_per_m(0.1),
                 ];
-                for k in 0..2 {
-                    let (told, std) = (f.told_factors[k], f.told_std[k]);
+                let told = f.told_factors.iter().zip(&f.told_std);
+                for (k, ((&told, &std), truth)) in told.zip(true_factors).enumerate() {
                     assert!(
-                        (TOLD_STD_MIN..=1.0).contains(&std)
-                            && (told - true_factors[k]).abs() <= std,
-                        "capsule {i} seed {seed}: told {told} +- {std}, truth {}",
-                        true_factors[k]
+                        (TOLD_STD_MIN..=1.0).contains(&std) && (told - truth).abs() <= std,
+                        "capsule {i} seed {seed}, factor {k}: told {told} +- {std}, truth {truth}"
                     );
                 }
                 covered += (f.gain_ci95[0] <= truth_g && truth_g <= f.gain_ci95[1]) as usize
