@@ -262,7 +262,7 @@ pub struct SimulateArgs {
     pub calibrated_gain_scale: Option<Vec<f64>>,
     /// Standard deviation of the told factors, as a fraction (default
     /// 0.03): how far the calibration may be off.
-    #[arg(long, value_name = "FRACTION")]
+    #[arg(long, value_name = "FRACTION", allow_hyphen_values = true)]
     pub calibrated_std: Option<f64>,
     #[arg(long, value_enum, default_value = "variable")]
     pub sampling: SamplingArg,
@@ -403,7 +403,7 @@ pub struct ReachArgs {
     #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
     pub calibrated_gain_scale: Option<Vec<f64>>,
     /// Standard deviation of the told factors (as `simulate --calibrated-std`).
-    #[arg(long, value_name = "FRACTION")]
+    #[arg(long, value_name = "FRACTION", allow_hyphen_values = true)]
     pub calibrated_std: Option<f64>,
     /// Minimum-time shots (see `simulate --shooting`; default: on).
     #[arg(long, conflicts_with = "no_shooting")]

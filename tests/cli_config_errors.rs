@@ -225,3 +225,49 @@ fn extra_delay_is_refused_where_it_means_nothing_or_is_out_of_range() {
         assert_one_line_error(&out, needle);
     }
 }
+
+/// `--calibrated-std` is checked before anything runs: a fraction within
+/// the runtime's [0.001, 1], and only with the factors it qualifies.
+#[test]
+fn calibrated_std_is_refused_out_of_range_or_without_factors() {
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &[
+                "simulate",
+                "--calibrated-gain-scale",
+                "1",
+                "--calibrated-std",
+                "-0.1",
+            ],
+            "calibrated std -0.1 is outside [0.001, 1]",
+        ),
+        (
+            &[
+                "reach",
+                "--calibrated-drag-scale",
+                "1.2",
+                "--calibrated-std",
+                "nan",
+            ],
+            "calibrated std NaN is outside [0.001, 1]",
+        ),
+        (
+            &[
+                "reach",
+                "--calibrated-drag-scale",
+                "1.2",
+                "--calibrated-std",
+                "3",
+            ],
+            "calibrated std 3 is outside [0.001, 1]",
+        ),
+        (
+            &["simulate", "--calibrated-std", "0.01"],
+            "--calibrated-std 0.01 needs the factors it qualifies",
+        ),
+    ];
+    for (args, needle) in cases {
+        let out = bin().args(args).output().unwrap();
+        assert_one_line_error(&out, needle);
+    }
+}
