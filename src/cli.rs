@@ -218,6 +218,49 @@ impl From<PresetArg> for Preset {
     }
 }
 
+/// How the simulated capsules differ from the model, and what the
+/// controller is told of them (`simulate`, `reach`).
+#[derive(Args, Debug, Clone)]
+pub struct PlantArgs {
+    /// The simulated capsules' drag as a factor of the model's: one for all
+    /// or one per capsule (S1,S2,...); the controller keeps the model.
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub plant_drag_scale: Option<Vec<f64>>,
+    /// The simulated capsules' magnetic gain as a factor of the model's
+    /// (one for all or one per capsule).
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub plant_gain_scale: Option<Vec<f64>>,
+    /// Drag factors the controller is told at the start, as a calibration
+    /// gives them (one for all or one per capsule):
+    /// `Controller::set_model_factors`. Without it the controller starts
+    /// from the model and learns them from frames.
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub calibrated_drag_scale: Option<Vec<f64>>,
+    /// Gain factors the controller is told at the start (as above).
+    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
+    pub calibrated_gain_scale: Option<Vec<f64>>,
+    /// Standard deviation of the told factors, as a fraction (default
+    /// 0.03): how far the calibration may be off.
+    #[arg(long, value_name = "FRACTION", allow_hyphen_values = true)]
+    pub calibrated_std: Option<f64>,
+}
+
+impl PlantArgs {
+    /// The simulated plant's factors.
+    pub fn mismatch(&self) -> capsule_mpc_sim::mismatch::PlantMismatch {
+        mismatch(&self.plant_drag_scale, &self.plant_gain_scale)
+    }
+
+    /// The told factors (None: none given) and their deviation, checked.
+    pub fn told(&self) -> anyhow::Result<(Option<capsule_mpc_sim::mismatch::PlantMismatch>, f64)> {
+        capsule_mpc_sim::closed_loop::told_factors(
+            self.calibrated_drag_scale.clone(),
+            self.calibrated_gain_scale.clone(),
+            self.calibrated_std,
+        )
+    }
+}
+
 #[derive(Debug, Clone, Args)]
 pub struct SimulateArgs {
     /// Config file (TOML); the embedded paper config when absent.
@@ -243,27 +286,8 @@ pub struct SimulateArgs {
         value_name = "X1,X2,..."
     )]
     pub start: Option<Vec<f64>>,
-    /// The simulated capsules' drag as a factor of the model's: one for all
-    /// or one per capsule (S1,S2,...); the controller keeps the model.
-    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
-    pub plant_drag_scale: Option<Vec<f64>>,
-    /// The simulated capsules' magnetic gain as a factor of the model's
-    /// (one for all or one per capsule).
-    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
-    pub plant_gain_scale: Option<Vec<f64>>,
-    /// Drag factors the controller is told at the start, as a calibration
-    /// would give them (one for all or one per capsule; standard deviation
-    /// 3 %): `Controller::set_model_factors`. Without it the controller
-    /// starts from the model and learns them from frames.
-    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
-    pub calibrated_drag_scale: Option<Vec<f64>>,
-    /// Gain factors the controller is told at the start (as above).
-    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
-    pub calibrated_gain_scale: Option<Vec<f64>>,
-    /// Standard deviation of the told factors, as a fraction (default
-    /// 0.03): how far the calibration may be off.
-    #[arg(long, value_name = "FRACTION", allow_hyphen_values = true)]
-    pub calibrated_std: Option<f64>,
+    #[command(flatten)]
+    pub plant: PlantArgs,
     #[arg(long, value_enum, default_value = "variable")]
     pub sampling: SamplingArg,
     #[arg(long, value_enum, default_value = "paper")]
@@ -387,24 +411,8 @@ pub struct ReachArgs {
         value_name = "X1,X2,..."
     )]
     pub start: Option<Vec<f64>>,
-    /// The simulated capsules' drag as a factor of the model's: one for all
-    /// or one per capsule (S1,S2,...); the controller keeps the model.
-    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
-    pub plant_drag_scale: Option<Vec<f64>>,
-    /// The simulated capsules' magnetic gain as a factor of the model's
-    /// (one for all or one per capsule).
-    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
-    pub plant_gain_scale: Option<Vec<f64>>,
-    /// Drag factors the controller is told at the start of every run, as a
-    /// calibration gives them (as `simulate --calibrated-drag-scale`).
-    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
-    pub calibrated_drag_scale: Option<Vec<f64>>,
-    /// Gain factors the controller is told (as above).
-    #[arg(long, value_delimiter = ',', value_name = "S1,S2,...")]
-    pub calibrated_gain_scale: Option<Vec<f64>>,
-    /// Standard deviation of the told factors (as `simulate --calibrated-std`).
-    #[arg(long, value_name = "FRACTION", allow_hyphen_values = true)]
-    pub calibrated_std: Option<f64>,
+    #[command(flatten)]
+    pub plant: PlantArgs,
     /// Minimum-time shots (see `simulate --shooting`; default: on).
     #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,
@@ -621,33 +629,6 @@ impl From<SwitchingArg> for capsule_mpc_runtime::controller::SwitchingRule {
             SwitchingArg::Paper => capsule_mpc_runtime::controller::SwitchingRule::Paper,
         }
     }
-}
-
-/// The standard deviation of `--calibrated-std` (the default when absent),
-/// refused without the factors it qualifies.
-pub fn calibrated_std(
-    known: &Option<capsule_mpc_sim::mismatch::PlantMismatch>,
-    std: Option<f64>,
-) -> anyhow::Result<f64> {
-    match (known, std) {
-        (None, Some(s)) => anyhow::bail!(
-            "--calibrated-std {s} needs the factors it qualifies: --calibrated-drag-scale or --calibrated-gain-scale"
-        ),
-        (_, Some(s)) => {
-            capsule_mpc_sim::closed_loop::check_known_factor_std(s)?;
-            Ok(s)
-        }
-        (_, None) => Ok(capsule_mpc_sim::closed_loop::KNOWN_FACTOR_STD),
-    }
-}
-
-/// The factors of `--calibrated-drag-scale` and `--calibrated-gain-scale`
-/// (None when neither is given).
-pub fn calibrated(
-    drag: &Option<Vec<f64>>,
-    gain: &Option<Vec<f64>>,
-) -> Option<capsule_mpc_sim::mismatch::PlantMismatch> {
-    (drag.is_some() || gain.is_some()).then(|| mismatch(drag, gain))
 }
 
 /// The plant mismatch of `--plant-drag-scale` and `--plant-gain-scale`

@@ -263,7 +263,7 @@ fn calibrated_std_is_refused_out_of_range_or_without_factors() {
         ),
         (
             &["simulate", "--calibrated-std", "0.01"],
-            "--calibrated-std 0.01 needs the factors it qualifies",
+            "calibrated std 0.01 needs the factors it qualifies",
         ),
     ];
     for (args, needle) in cases {

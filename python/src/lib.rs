@@ -10,7 +10,7 @@ use capsule_mpc_generator::config::{
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{ControllerSettings, CycleOutput, Sampling as RtSampling};
 use capsule_mpc_runtime::{Controller as RtController, RuntimeError};
-use capsule_mpc_sim::closed_loop::Sampling;
+use capsule_mpc_sim::closed_loop::{told_factors, Sampling};
 use capsule_mpc_sim::mismatch::PlantMismatch;
 use capsule_mpc_sim::plant::{disturbance_kind_from_name, DisturbanceLevel};
 use capsule_mpc_sim::reach::{reach_map, ReachOptions, ReachSummary};
@@ -154,30 +154,6 @@ fn mismatch_of(drag: Option<Vec<f64>>, gain: Option<Vec<f64>>) -> PlantMismatch 
     }
 }
 
-/// The told factors and their standard deviation (the default when None);
-/// a deviation without factors is refused, as on the CLI.
-fn known_of(
-    drag: Option<Vec<f64>>,
-    gain: Option<Vec<f64>>,
-    std: Option<f64>,
-) -> PyResult<(Option<PlantMismatch>, f64)> {
-    let known = (drag.is_some() || gain.is_some()).then(|| mismatch_of(drag, gain));
-    let std = match (&known, std) {
-        (None, Some(s)) => {
-            return Err(value_error(format!(
-                "calibrated_std {s} needs the factors it qualifies: calibrated_drag_scale or calibrated_gain_scale"
-            )))
-        }
-        (_, Some(s)) => {
-            capsule_mpc_sim::closed_loop::check_known_factor_std(s)
-                .map_err(|e| value_error(format!("{e:#}")))?;
-            s
-        }
-        (_, None) => capsule_mpc_sim::closed_loop::KNOWN_FACTOR_STD,
-    };
-    Ok((known, std))
-}
-
 /// One closed-loop run: the CLI's `simulate --json` report as a string.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
@@ -211,7 +187,8 @@ fn simulate_json(
     r.refine = refine.map(refine_of).transpose()?;
     r.mismatch = mismatch_of(plant_drag_scale, plant_gain_scale);
     (r.known_factors, r.known_factor_std) =
-        known_of(calibrated_drag_scale, calibrated_gain_scale, calibrated_std)?;
+        told_factors(calibrated_drag_scale, calibrated_gain_scale, calibrated_std)
+            .map_err(|e| value_error(format!("{e:#}")))?;
     let cfg = config.inner.clone();
     let report = py
         .allow_threads(|| r.run(&cfg))
@@ -249,7 +226,8 @@ fn reach_json(
         )));
     }
     let (known_factors, known_factor_std) =
-        known_of(calibrated_drag_scale, calibrated_gain_scale, calibrated_std)?;
+        told_factors(calibrated_drag_scale, calibrated_gain_scale, calibrated_std)
+            .map_err(|e| value_error(format!("{e:#}")))?;
     let opts = ReachOptions {
         range_m: range_cm / 100.0,
         step_m: step_cm / 100.0,

@@ -241,6 +241,32 @@ pub fn check_known_factor_std(std: f64) -> Result<()> {
     Ok(())
 }
 
+/// Factors the controller is told (None when neither scale is given) and
+/// their standard deviation (`KNOWN_FACTOR_STD` when absent), checked: a
+/// deviation without factors is refused, as is one out of range. The CLI's
+/// and Python's arguments both come through here.
+pub fn told_factors(
+    drag_scale: Option<Vec<f64>>,
+    gain_scale: Option<Vec<f64>>,
+    std: Option<f64>,
+) -> Result<(Option<PlantMismatch>, f64)> {
+    let known = (drag_scale.is_some() || gain_scale.is_some()).then(|| PlantMismatch {
+        drag_scale: drag_scale.unwrap_or_default(),
+        gain_scale: gain_scale.unwrap_or_default(),
+    });
+    let std = match (&known, std) {
+        (None, Some(s)) => bail!(
+            "calibrated std {s} needs the factors it qualifies: a calibrated drag or gain scale"
+        ),
+        (_, Some(s)) => {
+            check_known_factor_std(s)?;
+            s
+        }
+        (_, None) => KNOWN_FACTOR_STD,
+    };
+    Ok((known, std))
+}
+
 /// The extra delay after each tracking phase must lie in
 /// `[0, MAX_EXTRA_DELAY_S]` s, the runtime's range (its error would only
 /// name the setting); the error says the value and the range.

@@ -24,9 +24,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         Sampling::from(args.sampling),
         DisturbanceLevel::from(args.disturbance),
     );
-    let known_factors =
-        crate::cli::calibrated(&args.calibrated_drag_scale, &args.calibrated_gain_scale);
-    let known_factor_std = crate::cli::calibrated_std(&known_factors, args.calibrated_std)?;
+    let (known_factors, known_factor_std) = args.plant.told()?;
     let opts = ReachOptions {
         range_m: args.range_cm / 100.0,
         step_m: args.step_cm / 100.0,
@@ -37,7 +35,7 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         start_m: start_positions(args.start.as_deref(), config.capsule_count())?,
         duration_s: args.duration,
         extra_delay_s: crate::cli::extra_delay_for(args.sampling, args.extra_delay)?,
-        mismatch: crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale),
+        mismatch: args.plant.mismatch(),
         known_factors,
         known_factor_std,
         shooting: crate::cli::shooting_choice(args.shooting, args.no_shooting),

@@ -36,11 +36,8 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     request.lose_every = args.lose_every;
     request.hold = !args.no_hold;
     request.shooting = crate::cli::shooting_choice(args.shooting, args.no_shooting);
-    request.mismatch = crate::cli::mismatch(&args.plant_drag_scale, &args.plant_gain_scale);
-    request.known_factors =
-        crate::cli::calibrated(&args.calibrated_drag_scale, &args.calibrated_gain_scale);
-    request.known_factor_std =
-        crate::cli::calibrated_std(&request.known_factors, args.calibrated_std)?;
+    request.mismatch = args.plant.mismatch();
+    (request.known_factors, request.known_factor_std) = args.plant.told()?;
     request.refine = args.refine.map(Into::into);
     request.extra_delay_s = crate::cli::extra_delay_for(args.sampling, args.extra_delay)?;
     let opts = request.options(&config)?;
