@@ -637,8 +637,5 @@ pub fn mismatch(
     drag: &Option<Vec<f64>>,
     gain: &Option<Vec<f64>>,
 ) -> capsule_mpc_sim::mismatch::PlantMismatch {
-    capsule_mpc_sim::mismatch::PlantMismatch {
-        drag_scale: drag.clone().unwrap_or_default(),
-        gain_scale: gain.clone().unwrap_or_default(),
-    }
+    capsule_mpc_sim::mismatch::PlantMismatch::from_scales(drag.clone(), gain.clone())
 }

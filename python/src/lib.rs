@@ -147,13 +147,6 @@ fn refine_of(name: &str) -> PyResult<RefineMode> {
     }
 }
 
-fn mismatch_of(drag: Option<Vec<f64>>, gain: Option<Vec<f64>>) -> PlantMismatch {
-    PlantMismatch {
-        drag_scale: drag.unwrap_or_default(),
-        gain_scale: gain.unwrap_or_default(),
-    }
-}
-
 /// One closed-loop run: the CLI's `simulate --json` report as a string.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
@@ -185,7 +178,7 @@ fn simulate_json(
     r.seed = seed;
     r.duration_s = duration_s;
     r.refine = refine.map(refine_of).transpose()?;
-    r.mismatch = mismatch_of(plant_drag_scale, plant_gain_scale);
+    r.mismatch = PlantMismatch::from_scales(plant_drag_scale, plant_gain_scale);
     (r.known_factors, r.known_factor_std) =
         told_factors(calibrated_drag_scale, calibrated_gain_scale, calibrated_std)
             .map_err(|e| value_error(format!("{e:#}")))?;
@@ -238,7 +231,7 @@ fn reach_json(
         start_m: Vec::new(),
         duration_s: None,
         extra_delay_s: None,
-        mismatch: mismatch_of(plant_drag_scale, plant_gain_scale),
+        mismatch: PlantMismatch::from_scales(plant_drag_scale, plant_gain_scale),
         known_factors,
         known_factor_std,
         shooting,

@@ -17,15 +17,36 @@ use capsule_mpc_sim::closed_loop::{run, Retarget, RunOptions, Sampling};
 use capsule_mpc_sim::mismatch::PlantMismatch;
 use capsule_mpc_sim::plant::DisturbanceLevel;
 
-fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let drag: f64 = args[1].parse().unwrap();
-    let gain: f64 = args[2].parse().unwrap();
-    let sampling = if args[3] == "constant" {
-        Sampling::Constant
-    } else {
-        Sampling::Variable
+const USAGE: &str = "usage: second_move DRAG GAIN constant|variable (DRAG, GAIN: the plant's factors, e.g. 1.2 1.0)";
+
+/// The plant's factors and the sampling, or a one-line error naming the
+/// argument.
+fn parse_args(args: &[String]) -> Result<(f64, f64, Sampling), String> {
+    let [drag, gain, sampling] = args else {
+        return Err(USAGE.to_string());
     };
+    let factor = |name: &str, v: &str| match v.parse::<f64>() {
+        Ok(f) if f.is_finite() && f > 0.0 => Ok(f),
+        _ => Err(format!("{name} {v:?} is not a positive factor; {USAGE}")),
+    };
+    let sampling = match sampling.as_str() {
+        "constant" => Sampling::Constant,
+        "variable" => Sampling::Variable,
+        other => {
+            return Err(format!(
+                "sampling {other:?} is not constant or variable; {USAGE}"
+            ))
+        }
+    };
+    Ok((factor("DRAG", drag)?, factor("GAIN", gain)?, sampling))
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (drag, gain, sampling) = parse_args(&args).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2);
+    });
     let config = Config::embedded_default();
     let model = Model::from_config(&config);
     let first = [0.02, -0.01];

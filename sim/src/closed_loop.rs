@@ -250,10 +250,8 @@ pub fn told_factors(
     gain_scale: Option<Vec<f64>>,
     std: Option<f64>,
 ) -> Result<(Option<PlantMismatch>, f64)> {
-    let known = (drag_scale.is_some() || gain_scale.is_some()).then(|| PlantMismatch {
-        drag_scale: drag_scale.unwrap_or_default(),
-        gain_scale: gain_scale.unwrap_or_default(),
-    });
+    let known = (drag_scale.is_some() || gain_scale.is_some())
+        .then(|| PlantMismatch::from_scales(drag_scale, gain_scale));
     let std = match (&known, std) {
         (None, Some(s)) => bail!(
             "calibrated std {s} needs the factors it qualifies: a calibrated drag or gain scale"

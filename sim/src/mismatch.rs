@@ -31,6 +31,19 @@ impl PlantMismatch {
         }
     }
 
+    /// From optional per-capsule lists (absent: the model's 1 for all), as
+    /// the CLI's and Python's `*_drag_scale` / `*_gain_scale` arguments give
+    /// them.
+    pub fn from_scales(
+        drag_scale: Option<Vec<f64>>,
+        gain_scale: Option<Vec<f64>>,
+    ) -> PlantMismatch {
+        PlantMismatch {
+            drag_scale: drag_scale.unwrap_or_default(),
+            gain_scale: gain_scale.unwrap_or_default(),
+        }
+    }
+
     /// Whether the plant is the model.
     pub fn is_nominal(&self) -> bool {
         self.drag_scale
