@@ -134,6 +134,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // A new start: the host's clock restarts too.
         self.est.actuation_end_s = None;
         self.est.full_state_gradient = None;
+        self.restart_factor_window();
         self.restart_plan();
         self.sup.forget_mode();
         Ok(())
@@ -285,6 +286,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             std_devs[1] * std_devs[1],
         ];
         self.refresh_applied_scales();
+        self.restart_factor_window();
         if self.est.at_start {
             self.seed_start_speeds();
         }
@@ -329,6 +331,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.sup.has_target = true;
         self.sup.recovering = false;
         self.apply_leg(&x, &leg);
+        self.restart_factor_window();
         self.restart_plan();
         self.sup.forget_mode();
         Ok(())

@@ -19,6 +19,7 @@
 
 pub mod controller;
 pub mod estimator;
+pub mod factor_fit;
 pub mod switching;
 
 pub use capsule_mpc_generated as generated;

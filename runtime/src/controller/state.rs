@@ -5,6 +5,7 @@
 
 use super::StationKeeper;
 use crate::estimator::{CapsuleFilter, ScaleEstimate};
+use crate::factor_fit::FactorWindow;
 
 /// What a cycle does. Decided in one place (`Controller::next_mode`, then
 /// `Mode::after_solve`); each mode's step is one call in `plan_from`.
@@ -64,6 +65,9 @@ pub(super) struct Estimation<const NX: usize> {
     /// the estimate differs from the model significantly).
     pub scales: [ScaleEstimate; NX],
     pub applied_scales: [[f64; 2]; NX],
+    /// The frames and gradients since the move's start, to which the
+    /// factors are fitted.
+    pub window: FactorWindow<NX>,
     /// Re-acquisition candidate: a filter started at the first gated-out
     /// frame and updated with the gated-out frames that agree with it, so
     /// that a re-acquired estimate has speeds from the frames.
@@ -99,6 +103,7 @@ impl<const NX: usize> Estimation<NX> {
             model_drift: [[0.0; 2]; NX],
             scales: [ScaleEstimate::new(gain_uncertainty, drag_uncertainty); NX],
             applied_scales: [[1.0, 1.0]; NX],
+            window: FactorWindow::new(),
             candidate: [CapsuleFilter::new(0.0, 0.0); NX],
             candidate_frames: 0,
             replaced: [CapsuleFilter::new(0.0, 0.0); NX],

@@ -9,6 +9,7 @@ use super::settings::*;
 use super::status::*;
 use super::Controller;
 use crate::estimator::*;
+use crate::factor_fit::*;
 use capsule_mpc_solver::*;
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
@@ -192,6 +193,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 }
                 self.update_scales(z, r);
                 update_filters(&mut self.est.filters[..m], z, r);
+                self.fit_factors(z, r);
                 self.refresh_applied_scales();
                 RuntimeStatus::Ok
             }
@@ -259,6 +261,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     /// The estimate jumped (re-acquired): forget the counters and the plan.
     pub(super) fn after_reacquisition(&mut self) {
+        self.restart_factor_window();
         self.est.model_drift = [[0.0; 2]; NX];
         self.est.gated_rejections = 0;
         self.est.candidate_frames = 0;
@@ -303,8 +306,45 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             let f = self.est.filters[i];
             let s = f.cov[0] + r;
             let innovation = zi - f.mean[0];
-            self.est.scales[i].update(innovation, s, self.est.applied_scales[i]);
+            if !BATCH_FIT {
+                self.est.scales[i].update(innovation, s, self.est.applied_scales[i]);
+            }
             self.est.scales[i].after_kinematic_update([f.cov[0] / s, f.cov[2] / s]);
+        }
+    }
+
+    /// Starts a new factor window at the current estimate, the factors'
+    /// estimate its prior.
+    pub(super) fn restart_factor_window(&mut self) {
+        self.est.window.clear();
+        for i in 0..NX / 2 {
+            let (f, s) = (self.est.filters[i], self.est.scales[i]);
+            self.est.window.start_capsule(i, f.mean, f.cov, s.mean, s.cov);
+        }
+    }
+
+    /// Adds accepted frame `z` to the window and refits every capsule's
+    /// factors to it; they become the factors' estimate.
+    pub(super) fn fit_factors(&mut self, z: &[f64], r: f64) {
+        if !BATCH_FIT {
+            return;
+        }
+        if !self.est.window.record_frame(z) {
+            self.restart_factor_window();
+            return;
+        }
+        let model = ModelStep::<S, NX, K>(core::marker::PhantomData);
+        let r_fit = r + SCALE_FRAME_STD_M * SCALE_FRAME_STD_M * FIT_FLOOR_SHARE;
+        for i in 0..NX / 2 {
+            self.est
+                .window
+                .fit_capsule(i, &model, r_fit, [MODEL_FACTOR_MIN, MODEL_FACTOR_MAX]);
+            let p = self.est.window.fitted[i];
+            self.est.scales[i].mean = [p[2], p[3]];
+            self.est.scales[i].cov = self.est.window.fitted_cov[i];
+            if FIT_SPEED && self.est.window.frames() >= 3 {
+                self.est.filters[i].mean[1] = self.est.window.fitted_end[i][1];
+            }
         }
     }
 
@@ -401,6 +441,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
         };
         let m = NX / 2;
+        if BATCH_FIT && !self.est.window.record_segment(u, duration_s) {
+            self.restart_factor_window();
+            self.est.window.record_segment(u, duration_s);
+        }
         self.accumulate_model_drift(u, duration_s);
         for (i, &s) in applied.iter().enumerate().take(m) {
             let (_, a, b) = factor_step::<S, NX, K>(i, self.est.filters[i].mean, u, duration_s, s);
@@ -429,6 +473,27 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 .iter()
                 .all(|f| f.position_std_m() <= REPLACED_TRACK_MAX_STD_M);
         }
+    }
+}
+
+/// Experiment switch.
+pub(super) const BATCH_FIT: bool = true;
+pub(super) const FIT_FLOOR_SHARE: f64 = 1.0;
+pub(super) const FIT_SPEED: bool = false;
+
+/// The model's step with its factor sensitivity, for the factor fit.
+struct ModelStep<S, const NX: usize, const K: usize>(core::marker::PhantomData<S>);
+
+impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> FactorStep for ModelStep<S, NX, K> {
+    fn step(
+        &self,
+        i: usize,
+        xv: [f64; 2],
+        u: f64,
+        duration_s: f64,
+        factors: [f64; 2],
+    ) -> ([f64; 2], [f64; 4], [f64; 4]) {
+        factor_step::<S, NX, K>(i, xv, u, duration_s, factors)
     }
 }
 

@@ -1,0 +1,349 @@
+//! The capsules' gain and drag factors fitted to a window of frames: a
+//! batch (Gauss-Newton) fit of each capsule's start state and two factors
+//! to every accepted frame since the window's start, with the gradient
+//! that was played between them known.
+//!
+//! The recursive estimate (`estimator::ScaleEstimate`) regresses each
+//! frame's innovation once, linearized where the estimate was then, while
+//! the kinematic filter absorbs most of the same innovation into the
+//! state; a move's frames identify the factors several times better when
+//! refitted together along one trajectory (docs/decisions.md). The window
+//! is fixed-size: when full it restarts from the current estimate with the
+//! fit's factors as its prior.
+
+/// Segments (constant-gradient stretches between frames) a window holds.
+pub const FIT_SEGMENTS: usize = 96;
+
+/// Frames a window holds.
+pub const FIT_FRAMES: usize = 48;
+
+/// Gauss-Newton passes per fit (each warm-started from the last fit).
+pub const FIT_PASSES: usize = 2;
+
+/// Smallest variance of the start state's prior (position m^2, speed
+/// (m/s)^2): a start known exactly would make the prior singular.
+pub const FIT_START_VAR_MIN: [f64; 2] = [1.0e-12, 1.0e-10];
+
+/// The fit's parameters per capsule: start position (m), start speed
+/// (m/s), gain factor, drag factor.
+const P: usize = 4;
+
+/// Capsule `i`'s model step from (x, v) over a duration at a gradient with
+/// factors [gain, drag]: the next (x, v), its Jacobian in (x, v) and its
+/// sensitivity to the factors (row major 2x2 each).
+pub trait FactorStep {
+    fn step(
+        &self,
+        i: usize,
+        xv: [f64; 2],
+        u: f64,
+        duration_s: f64,
+        factors: [f64; 2],
+    ) -> ([f64; 2], [f64; 4], [f64; 4]);
+}
+
+/// One window of frames and the gradient played between them, and the
+/// fit of every capsule (first M entries) to it.
+#[derive(Debug, Clone)]
+pub struct FactorWindow<const NX: usize> {
+    /// Per capsule: the start state's prior, mean (x, v) and covariance
+    /// (row major 2x2).
+    start: [[f64; 2]; NX],
+    start_cov: [[f64; 4]; NX],
+    /// Per capsule: the factors' prior, mean and covariance.
+    prior: [[f64; 2]; NX],
+    prior_cov: [[f64; 4]; NX],
+    /// (gradient T/m, duration s) played since the start.
+    segments: [[f64; 2]; FIT_SEGMENTS],
+    n_segments: usize,
+    /// (segments before the frame, positions m).
+    frame_at: [usize; FIT_FRAMES],
+    frames: [[f64; NX]; FIT_FRAMES],
+    n_frames: usize,
+    /// Per capsule: the fitted (x0, v0, gain, drag) and the factors'
+    /// covariance.
+    pub fitted: [[f64; P]; NX],
+    pub fitted_cov: [[f64; 4]; NX],
+    /// Per capsule: the fitted trajectory's state at the last segment's end.
+    pub fitted_end: [[f64; 2]; NX],
+}
+
+impl<const NX: usize> FactorWindow<NX> {
+    pub const fn new() -> Self {
+        FactorWindow {
+            start: [[0.0; 2]; NX],
+            start_cov: [[0.0; 4]; NX],
+            prior: [[1.0; 2]; NX],
+            prior_cov: [[0.0; 4]; NX],
+            segments: [[0.0; 2]; FIT_SEGMENTS],
+            n_segments: 0,
+            frame_at: [0; FIT_FRAMES],
+            frames: [[0.0; NX]; FIT_FRAMES],
+            n_frames: 0,
+            fitted: [[0.0, 0.0, 1.0, 1.0]; NX],
+            fitted_cov: [[0.0; 4]; NX],
+            fitted_end: [[0.0; 2]; NX],
+        }
+    }
+
+    /// Empties the window (then `start_capsule` for every capsule).
+    pub fn clear(&mut self) {
+        self.n_segments = 0;
+        self.n_frames = 0;
+    }
+
+    /// Starts capsule `i` at state `mean` (covariance `cov`) with factor
+    /// prior `factors` (covariance `factors_cov`).
+    pub fn start_capsule(
+        &mut self,
+        i: usize,
+        mean: [f64; 2],
+        cov: [f64; 4],
+        factors: [f64; 2],
+        factors_cov: [f64; 4],
+    ) {
+        self.start[i] = mean;
+        self.start_cov[i] = cov;
+        self.prior[i] = factors;
+        self.prior_cov[i] = factors_cov;
+        self.fitted[i] = [mean[0], mean[1], factors[0], factors[1]];
+        self.fitted_cov[i] = factors_cov;
+    }
+
+    /// Whether another segment or frame would not fit.
+    pub fn is_full(&self) -> bool {
+        self.n_segments >= FIT_SEGMENTS || self.n_frames >= FIT_FRAMES
+    }
+
+    /// Frames in the window.
+    pub fn frames(&self) -> usize {
+        self.n_frames
+    }
+
+    /// Gradient `u` played for `duration_s` (merged with the previous
+    /// segment when no frame came between and the gradient is the same).
+    /// False when the window is full.
+    pub fn record_segment(&mut self, u: f64, duration_s: f64) -> bool {
+        if !(duration_s > 0.0) {
+            return true;
+        }
+        let n = self.n_segments;
+        let frame_between = self.n_frames > 0 && self.frame_at[self.n_frames - 1] == n;
+        if n > 0 && !frame_between && self.segments[n - 1][0] == u {
+            self.segments[n - 1][1] += duration_s;
+            return true;
+        }
+        if n >= FIT_SEGMENTS {
+            return false;
+        }
+        self.segments[n] = [u, duration_s];
+        self.n_segments += 1;
+        true
+    }
+
+    /// An accepted frame `z` (first M entries) now. False when full.
+    pub fn record_frame(&mut self, z: &[f64]) -> bool {
+        if self.n_frames >= FIT_FRAMES {
+            return false;
+        }
+        let k = self.n_frames;
+        self.frame_at[k] = self.n_segments;
+        for (f, &p) in self.frames[k].iter_mut().zip(z) {
+            *f = p;
+        }
+        self.n_frames += 1;
+        true
+    }
+
+    /// Refits capsule `i` (`FIT_PASSES` Gauss-Newton passes from the last
+    /// fit) with frame variance `r_m2`; factors kept within `bounds`.
+    pub fn fit_capsule<F: FactorStep>(&mut self, i: usize, model: &F, r_m2: f64, bounds: [f64; 2]) {
+        let prior_info = self.prior_information(i);
+        let prior_mean = [
+            self.start[i][0],
+            self.start[i][1],
+            self.prior[i][0],
+            self.prior[i][1],
+        ];
+        let mut p = self.fitted[i];
+        for _ in 0..FIT_PASSES {
+            let Some((h, g, _, _)) = self.normal_equations(i, model, &p, r_m2, &prior_info, &prior_mean)
+            else {
+                return;
+            };
+            let Some(l) = cholesky(&h) else {
+                return;
+            };
+            let d = cholesky_solve(&l, &g);
+            for k in 0..P {
+                p[k] += d[k];
+            }
+            p[2] = p[2].clamp(bounds[0], bounds[1]);
+            p[3] = p[3].clamp(bounds[0], bounds[1]);
+            if !p.iter().all(|v| v.is_finite()) {
+                return;
+            }
+        }
+        let Some((h, _, chi2, end)) = self.normal_equations(i, model, &p, r_m2, &prior_info, &prior_mean)
+        else {
+            return;
+        };
+        let Some(l) = cholesky(&h) else {
+            return;
+        };
+        // The factors' block of the inverse, widened when the frames
+        // scatter more than their noise says (a disturbance the fit does
+        // not model).
+        let c0 = cholesky_solve(&l, &[0.0, 0.0, 1.0, 0.0]);
+        let c1 = cholesky_solve(&l, &[0.0, 0.0, 0.0, 1.0]);
+        let dof = self.n_frames as f64 - 2.0;
+        let inflate = if dof > 2.0 { (chi2 / dof).max(1.0) } else { 1.0 };
+        self.fitted[i] = p;
+        self.fitted_end[i] = end;
+        self.fitted_cov[i] = [
+            c0[2] * inflate,
+            c1[2] * inflate,
+            c0[3] * inflate,
+            c1[3] * inflate,
+        ];
+    }
+
+    /// The prior's information matrix (4x4, row major): block diagonal in
+    /// the start state and the factors.
+    fn prior_information(&self, i: usize) -> [f64; P * P] {
+        let s = self.start_cov[i];
+        let s = [
+            s[0].max(FIT_START_VAR_MIN[0]),
+            s[1],
+            s[2],
+            s[3].max(FIT_START_VAR_MIN[1]),
+        ];
+        let a = inverse2(s);
+        let b = inverse2(self.prior_cov[i]);
+        let mut h = [0.0; P * P];
+        h[0] = a[0];
+        h[1] = a[1];
+        h[P] = a[2];
+        h[P + 1] = a[3];
+        h[2 * P + 2] = b[0];
+        h[2 * P + 3] = b[1];
+        h[3 * P + 2] = b[2];
+        h[3 * P + 3] = b[3];
+        h
+    }
+
+    /// J'WJ + prior information, J'W r + prior pull, and the frames'
+    /// chi-square, linearized at `p`: one rollout with its sensitivity.
+    fn normal_equations<F: FactorStep>(
+        &self,
+        i: usize,
+        model: &F,
+        p: &[f64; P],
+        r_m2: f64,
+        prior_info: &[f64; P * P],
+        prior_mean: &[f64; P],
+    ) -> Option<([f64; P * P], [f64; P], f64, [f64; 2])> {
+        let mut h = *prior_info;
+        let mut g = [0.0; P];
+        for a in 0..P {
+            for b in 0..P {
+                g[a] += prior_info[a * P + b] * (prior_mean[b] - p[b]);
+            }
+        }
+        let w = 1.0 / r_m2;
+        let mut chi2 = 0.0;
+        let mut s = [p[0], p[1]];
+        // d(x, v)/d(x0, v0, gain, drag), rows x and v.
+        let mut sens = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]];
+        let mut f = 0;
+        let mut add_frames = |seg: usize, s: &[f64; 2], sens: &[[f64; P]; 2], f: &mut usize| {
+            while *f < self.n_frames && self.frame_at[*f] == seg {
+                let r = self.frames[*f][i] - s[0];
+                chi2 += r * r * w;
+                for a in 0..P {
+                    g[a] += sens[0][a] * w * r;
+                    for b in 0..P {
+                        h[a * P + b] += sens[0][a] * w * sens[0][b];
+                    }
+                }
+                *f += 1;
+            }
+        };
+        for seg in 0..self.n_segments {
+            add_frames(seg, &s, &sens, &mut f);
+            let [u, dt] = self.segments[seg];
+            let (next, a, b) = model.step(i, s, u, dt, [p[2], p[3]]);
+            let old = sens;
+            for c in 0..P {
+                sens[0][c] = a[0] * old[0][c] + a[1] * old[1][c];
+                sens[1][c] = a[2] * old[0][c] + a[3] * old[1][c];
+            }
+            sens[0][2] += b[0];
+            sens[0][3] += b[1];
+            sens[1][2] += b[2];
+            sens[1][3] += b[3];
+            s = next;
+        }
+        add_frames(self.n_segments, &s, &sens, &mut f);
+        (h.iter().all(|v| v.is_finite()) && g.iter().all(|v| v.is_finite())).then_some((h, g, chi2, s))
+    }
+}
+
+impl<const NX: usize> Default for FactorWindow<NX> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Inverse of a symmetric 2x2 (row major); zero when singular.
+fn inverse2(m: [f64; 4]) -> [f64; 4] {
+    let det = m[0] * m[3] - m[1] * m[2];
+    if !(det > 0.0) || !det.is_finite() {
+        return [0.0; 4];
+    }
+    [m[3] / det, -m[1] / det, -m[2] / det, m[0] / det]
+}
+
+/// Lower Cholesky factor of a 4x4 (row major); None unless positive
+/// definite.
+fn cholesky(h: &[f64; P * P]) -> Option<[f64; P * P]> {
+    let mut l = [0.0; P * P];
+    for r in 0..P {
+        for c in 0..=r {
+            let mut s = h[r * P + c];
+            for k in 0..c {
+                s -= l[r * P + k] * l[c * P + k];
+            }
+            if r == c {
+                if !(s > 0.0) {
+                    return None;
+                }
+                l[r * P + c] = libm::sqrt(s);
+            } else {
+                l[r * P + c] = s / l[c * P + c];
+            }
+        }
+    }
+    Some(l)
+}
+
+/// Solves L L' x = b.
+fn cholesky_solve(l: &[f64; P * P], b: &[f64; P]) -> [f64; P] {
+    let mut y = [0.0; P];
+    for r in 0..P {
+        let mut s = b[r];
+        for k in 0..r {
+            s -= l[r * P + k] * y[k];
+        }
+        y[r] = s / l[r * P + r];
+    }
+    let mut x = [0.0; P];
+    for r in (0..P).rev() {
+        let mut s = y[r];
+        for k in r + 1..P {
+            s -= l[k * P + r] * x[k];
+        }
+        x[r] = s / l[r * P + r];
+    }
+    x
+}
