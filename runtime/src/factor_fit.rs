@@ -24,13 +24,18 @@ pub const FIT_PASSES: usize = 2;
 /// (m/s)^2): a start known exactly would make the prior singular.
 pub const FIT_START_VAR_MIN: [f64; 2] = [1.0e-12, 1.0e-10];
 
+/// Smallest variance of the constant acceleration's prior, (m/s^2)^2.
+pub const FIT_BIAS_VAR_MIN: f64 = 1.0e-12;
+
 /// The fit's parameters per capsule: start position (m), start speed
-/// (m/s), gain factor, drag factor.
-const P: usize = 4;
+/// (m/s), gain factor, drag factor, a constant acceleration (m/s^2; a
+/// steady disturbance, which would otherwise pass for a factor).
+const P: usize = 5;
 
 /// Capsule `i`'s model step from (x, v) over a duration at a gradient with
-/// factors [gain, drag]: the next (x, v), its Jacobian in (x, v) and its
-/// sensitivity to the factors (row major 2x2 each).
+/// factors [gain, drag] and an added constant acceleration `bias`: the
+/// next (x, v), its Jacobian in (x, v) (row major 2x2) and its
+/// sensitivity to [gain, drag, bias] (row major 2x3).
 pub trait FactorStep {
     fn step(
         &self,
@@ -39,7 +44,8 @@ pub trait FactorStep {
         u: f64,
         duration_s: f64,
         factors: [f64; 2],
-    ) -> ([f64; 2], [f64; 4], [f64; 4]);
+        bias_m_per_s2: f64,
+    ) -> ([f64; 2], [f64; 4], [f64; 6]);
 }
 
 /// One window of frames and the gradient played between them, and the
@@ -53,6 +59,8 @@ pub struct FactorWindow<const NX: usize> {
     /// Per capsule: the factors' prior, mean and covariance.
     prior: [[f64; 2]; NX],
     prior_cov: [[f64; 4]; NX],
+    /// Per capsule: the constant acceleration's prior, mean and variance.
+    bias_prior: [[f64; 2]; NX],
     /// (gradient T/m, duration s) played since the start.
     segments: [[f64; 2]; FIT_SEGMENTS],
     n_segments: usize,
@@ -60,8 +68,8 @@ pub struct FactorWindow<const NX: usize> {
     frame_at: [usize; FIT_FRAMES],
     frames: [[f64; NX]; FIT_FRAMES],
     n_frames: usize,
-    /// Per capsule: the fitted (x0, v0, gain, drag) and the factors'
-    /// covariance.
+    /// Per capsule: the fitted (x0, v0, gain, drag, bias) and the
+    /// factors' covariance.
     pub fitted: [[f64; P]; NX],
     pub fitted_cov: [[f64; 4]; NX],
     /// Per capsule: the fitted trajectory's state at the last segment's end.
@@ -75,12 +83,13 @@ impl<const NX: usize> FactorWindow<NX> {
             start_cov: [[0.0; 4]; NX],
             prior: [[1.0; 2]; NX],
             prior_cov: [[0.0; 4]; NX],
+            bias_prior: [[0.0; 2]; NX],
             segments: [[0.0; 2]; FIT_SEGMENTS],
             n_segments: 0,
             frame_at: [0; FIT_FRAMES],
             frames: [[0.0; NX]; FIT_FRAMES],
             n_frames: 0,
-            fitted: [[0.0, 0.0, 1.0, 1.0]; NX],
+            fitted: [[0.0, 0.0, 1.0, 1.0, 0.0]; NX],
             fitted_cov: [[0.0; 4]; NX],
             fitted_end: [[0.0; 2]; NX],
         }
@@ -93,7 +102,8 @@ impl<const NX: usize> FactorWindow<NX> {
     }
 
     /// Starts capsule `i` at state `mean` (covariance `cov`) with factor
-    /// prior `factors` (covariance `factors_cov`).
+    /// prior `factors` (covariance `factors_cov`) and a constant
+    /// acceleration of prior [mean m/s^2, variance (m/s^2)^2] `bias`.
     pub fn start_capsule(
         &mut self,
         i: usize,
@@ -101,12 +111,14 @@ impl<const NX: usize> FactorWindow<NX> {
         cov: [f64; 4],
         factors: [f64; 2],
         factors_cov: [f64; 4],
+        bias: [f64; 2],
     ) {
         self.start[i] = mean;
         self.start_cov[i] = cov;
         self.prior[i] = factors;
         self.prior_cov[i] = factors_cov;
-        self.fitted[i] = [mean[0], mean[1], factors[0], factors[1]];
+        self.bias_prior[i] = bias;
+        self.fitted[i] = [mean[0], mean[1], factors[0], factors[1], bias[0]];
         self.fitted_cov[i] = factors_cov;
     }
 
@@ -164,13 +176,21 @@ impl<const NX: usize> FactorWindow<NX> {
             self.start[i][1],
             self.prior[i][0],
             self.prior[i][1],
+            self.bias_prior[i][0],
         ];
         let mut p = self.fitted[i];
         for _ in 0..FIT_PASSES {
-            let Some((h, g, _, _)) = self.normal_equations(i, model, &p, r_m2, &prior_info, &prior_mean)
-            else {
+            let Some(data) = self.frames_information(i, model, &p, r_m2) else {
                 return;
             };
+            let mut h = prior_info;
+            let mut g = data.gradient;
+            for a in 0..P {
+                for b in 0..P {
+                    h[a * P + b] += data.information[a * P + b];
+                    g[a] += prior_info[a * P + b] * (prior_mean[b] - p[b]);
+                }
+            }
             let Some(l) = cholesky(&h) else {
                 return;
             };
@@ -184,28 +204,30 @@ impl<const NX: usize> FactorWindow<NX> {
                 return;
             }
         }
-        let Some((h, _, chi2, end)) = self.normal_equations(i, model, &p, r_m2, &prior_info, &prior_mean)
-        else {
+        let Some(data) = self.frames_information(i, model, &p, r_m2) else {
             return;
         };
+        // The frames count for less when they scatter more than their
+        // noise says (a disturbance the fit does not model); the prior
+        // (a calibration, or the last window) keeps its weight.
+        let dof = self.n_frames as f64 - 2.0;
+        let inflate = if dof > 2.0 {
+            (data.chi2 / dof).max(1.0)
+        } else {
+            1.0
+        };
+        let mut h = prior_info;
+        for (hk, dk) in h.iter_mut().zip(&data.information) {
+            *hk += dk / inflate;
+        }
         let Some(l) = cholesky(&h) else {
             return;
         };
-        // The factors' block of the inverse, widened when the frames
-        // scatter more than their noise says (a disturbance the fit does
-        // not model).
-        let c0 = cholesky_solve(&l, &[0.0, 0.0, 1.0, 0.0]);
-        let c1 = cholesky_solve(&l, &[0.0, 0.0, 0.0, 1.0]);
-        let dof = self.n_frames as f64 - 2.0;
-        let inflate = if dof > 2.0 { (chi2 / dof).max(1.0) } else { 1.0 };
+        let c0 = cholesky_solve(&l, &[0.0, 0.0, 1.0, 0.0, 0.0]);
+        let c1 = cholesky_solve(&l, &[0.0, 0.0, 0.0, 1.0, 0.0]);
         self.fitted[i] = p;
-        self.fitted_end[i] = end;
-        self.fitted_cov[i] = [
-            c0[2] * inflate,
-            c1[2] * inflate,
-            c0[3] * inflate,
-            c1[3] * inflate,
-        ];
+        self.fitted_end[i] = data.end;
+        self.fitted_cov[i] = [c0[2], c1[2], c0[3], c1[3]];
     }
 
     /// The prior's information matrix (4x4, row major): block diagonal in
@@ -229,64 +251,72 @@ impl<const NX: usize> FactorWindow<NX> {
         h[2 * P + 3] = b[1];
         h[3 * P + 2] = b[2];
         h[3 * P + 3] = b[3];
+        h[4 * P + 4] = 1.0 / self.bias_prior[i][1].max(FIT_BIAS_VAR_MIN);
         h
     }
 
-    /// J'WJ + prior information, J'W r + prior pull, and the frames'
-    /// chi-square, linearized at `p`: one rollout with its sensitivity.
-    fn normal_equations<F: FactorStep>(
+    /// What the frames say about capsule `i`'s parameters, linearized at
+    /// `p`: one rollout with its sensitivity.
+    fn frames_information<F: FactorStep>(
         &self,
         i: usize,
         model: &F,
         p: &[f64; P],
         r_m2: f64,
-        prior_info: &[f64; P * P],
-        prior_mean: &[f64; P],
-    ) -> Option<([f64; P * P], [f64; P], f64, [f64; 2])> {
-        let mut h = *prior_info;
-        let mut g = [0.0; P];
-        for a in 0..P {
-            for b in 0..P {
-                g[a] += prior_info[a * P + b] * (prior_mean[b] - p[b]);
-            }
-        }
+    ) -> Option<FramesInformation> {
         let w = 1.0 / r_m2;
-        let mut chi2 = 0.0;
-        let mut s = [p[0], p[1]];
-        // d(x, v)/d(x0, v0, gain, drag), rows x and v.
-        let mut sens = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]];
+        let mut out = FramesInformation {
+            information: [0.0; P * P],
+            gradient: [0.0; P],
+            chi2: 0.0,
+            end: [p[0], p[1]],
+        };
+        // d(x, v)/d(x0, v0, gain, drag, bias), rows x and v.
+        let mut sens = [[1.0, 0.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0, 0.0]];
         let mut f = 0;
-        let mut add_frames = |seg: usize, s: &[f64; 2], sens: &[[f64; P]; 2], f: &mut usize| {
-            while *f < self.n_frames && self.frame_at[*f] == seg {
-                let r = self.frames[*f][i] - s[0];
-                chi2 += r * r * w;
+        for seg in 0..=self.n_segments {
+            while f < self.n_frames && self.frame_at[f] == seg {
+                let r = self.frames[f][i] - out.end[0];
+                out.chi2 += r * r * w;
                 for a in 0..P {
-                    g[a] += sens[0][a] * w * r;
+                    out.gradient[a] += sens[0][a] * w * r;
                     for b in 0..P {
-                        h[a * P + b] += sens[0][a] * w * sens[0][b];
+                        out.information[a * P + b] += sens[0][a] * w * sens[0][b];
                     }
                 }
-                *f += 1;
+                f += 1;
             }
-        };
-        for seg in 0..self.n_segments {
-            add_frames(seg, &s, &sens, &mut f);
+            if seg == self.n_segments {
+                break;
+            }
             let [u, dt] = self.segments[seg];
-            let (next, a, b) = model.step(i, s, u, dt, [p[2], p[3]]);
+            let (next, a, b) = model.step(i, out.end, u, dt, [p[2], p[3]], p[4]);
             let old = sens;
             for c in 0..P {
                 sens[0][c] = a[0] * old[0][c] + a[1] * old[1][c];
                 sens[1][c] = a[2] * old[0][c] + a[3] * old[1][c];
             }
-            sens[0][2] += b[0];
-            sens[0][3] += b[1];
-            sens[1][2] += b[2];
-            sens[1][3] += b[3];
-            s = next;
+            for c in 0..3 {
+                sens[0][2 + c] += b[c];
+                sens[1][2 + c] += b[3 + c];
+            }
+            out.end = next;
         }
-        add_frames(self.n_segments, &s, &sens, &mut f);
-        (h.iter().all(|v| v.is_finite()) && g.iter().all(|v| v.is_finite())).then_some((h, g, chi2, s))
+        let finite = out.information.iter().chain(&out.gradient).all(|v| v.is_finite())
+            && out.chi2.is_finite();
+        finite.then_some(out)
     }
+}
+
+/// The frames' part of a fit's normal equations.
+struct FramesInformation {
+    /// J' W J (row major) and J' W r.
+    information: [f64; P * P],
+    gradient: [f64; P],
+    /// Sum of squared residuals over their variance.
+    chi2: f64,
+    /// The trajectory's state at the window's end.
+    end: [f64; 2],
 }
 
 impl<const NX: usize> Default for FactorWindow<NX> {
@@ -304,7 +334,7 @@ fn inverse2(m: [f64; 4]) -> [f64; 4] {
     [m[3] / det, -m[1] / det, -m[2] / det, m[0] / det]
 }
 
-/// Lower Cholesky factor of a 4x4 (row major); None unless positive
+/// Lower Cholesky factor of a P x P (row major); None unless positive
 /// definite.
 fn cholesky(h: &[f64; P * P]) -> Option<[f64; P * P]> {
     let mut l = [0.0; P * P];

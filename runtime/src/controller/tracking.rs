@@ -8,6 +8,7 @@ use super::numeric::*;
 use super::settings::*;
 use super::status::*;
 use super::Controller;
+use super::Mode;
 use crate::estimator::*;
 use crate::factor_fit::*;
 use capsule_mpc_solver::*;
@@ -317,9 +318,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// estimate its prior.
     pub(super) fn restart_factor_window(&mut self) {
         self.est.window.clear();
+        let gamma = self.settings.disturbance_bound;
         for i in 0..NX / 2 {
             let (f, s) = (self.est.filters[i], self.est.scales[i]);
-            self.est.window.start_capsule(i, f.mean, f.cov, s.mean, s.cov);
+            let bias = [self.est.window.fitted[i][4], gamma * gamma];
+            self.est.window.start_capsule(i, f.mean, f.cov, s.mean, s.cov, bias);
         }
     }
 
@@ -327,6 +330,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// factors to it; they become the factors' estimate.
     pub(super) fn fit_factors(&mut self, z: &[f64], r: f64) {
         if !BATCH_FIT {
+            return;
+        }
+        if HOLD_RESTART && self.sup.mode == Mode::Hold {
+            // At rest the frames say little about the factors and much
+            // about a steady disturbance the fit does not model.
+            self.restart_factor_window();
             return;
         }
         if !self.est.window.record_frame(z) {
@@ -479,7 +488,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 /// Experiment switch.
 pub(super) const BATCH_FIT: bool = true;
 pub(super) const FIT_FLOOR_SHARE: f64 = 1.0;
+const BIAS_STEP_M_PER_S2: f64 = 1.0e-4;
 pub(super) const FIT_SPEED: bool = false;
+pub(super) const HOLD_RESTART: bool = false;
 
 /// The model's step with its factor sensitivity, for the factor fit.
 struct ModelStep<S, const NX: usize, const K: usize>(core::marker::PhantomData<S>);
@@ -492,8 +503,25 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> FactorStep for Model
         u: f64,
         duration_s: f64,
         factors: [f64; 2],
-    ) -> ([f64; 2], [f64; 4], [f64; 4]) {
-        factor_step::<S, NX, K>(i, xv, u, duration_s, factors)
+        bias_m_per_s2: f64,
+    ) -> ([f64; 2], [f64; 4], [f64; 6]) {
+        // A constant acceleration on capsule i alone is a gradient offset
+        // in its own step.
+        let per_gradient = factors[0] * S::capsule_gain(i);
+        let u_bias = if per_gradient != 0.0 {
+            bias_m_per_s2 / per_gradient
+        } else {
+            0.0
+        };
+        let (base, a, b) = factor_step::<S, NX, K>(i, xv, u + u_bias, duration_s, factors);
+        let du = BIAS_STEP_M_PER_S2 / per_gradient;
+        let (c, _) =
+            S::capsule_transition_scaled(i, xv, u + u_bias + du, duration_s, factors);
+        let dc = [
+            (c[0] - base[0]) / BIAS_STEP_M_PER_S2,
+            (c[1] - base[1]) / BIAS_STEP_M_PER_S2,
+        ];
+        (base, a, [b[0], b[1], dc[0], b[2], b[3], dc[1]])
     }
 }
 
