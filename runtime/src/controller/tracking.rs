@@ -321,8 +321,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let gamma = self.settings.disturbance_bound;
         for i in 0..NX / 2 {
             let (f, s) = (self.est.filters[i], self.est.scales[i]);
-            let bias = [self.est.window.fitted[i][4], gamma * gamma];
-            self.est.window.start_capsule(i, f.mean, f.cov, s.mean, s.cov, bias);
+            let fitted = self.est.window.fitted[i];
+            let bias = [fitted[4], fitted[5]];
+            let var = gamma * gamma;
+            self.est
+                .window
+                .start_capsule(i, f.mean, f.cov, s.mean, s.cov, bias, [var, var]);
         }
     }
 
