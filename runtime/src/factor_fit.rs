@@ -24,6 +24,11 @@ pub const FIT_PASSES: usize = 2;
 /// (m/s)^2): a start known exactly would make the prior singular.
 pub const FIT_START_VAR_MIN: [f64; 2] = [1.0e-12, 1.0e-10];
 
+/// How far (prior standard deviations) a window may move a factor from
+/// its prior: a disturbance the fit does not model must not drive the
+/// factors to their bounds.
+pub const FIT_PRIOR_SIGMAS: f64 = 4.0;
+
 /// Smallest variance of the steady disturbance's prior ((m/s^2)^2,
 /// (m/s)^2).
 pub const FIT_BIAS_VAR_MIN: f64 = 1.0e-12;
@@ -176,8 +181,26 @@ impl<const NX: usize> FactorWindow<NX> {
     }
 
     /// Refits capsule `i` (`FIT_PASSES` Gauss-Newton passes from the last
-    /// fit) with frame variance `r_m2`; factors kept within `bounds`.
-    pub fn fit_capsule<F: FactorStep>(&mut self, i: usize, model: &F, r_m2: f64, bounds: [f64; 2]) {
+    /// fit) with frame variance `noise.r_m2`; the disturbance of
+    /// acceleration PSD `noise.accel_psd` widens later frames' variance.
+    /// Each factor stays within `FIT_PRIOR_SIGMAS` prior standard
+    /// deviations of its prior and within `bounds`.
+    pub fn fit_capsule<F: FactorStep>(
+        &mut self,
+        i: usize,
+        model: &F,
+        noise: FitNoise,
+        bounds: [f64; 2],
+    ) {
+        let reach = |k: usize| {
+            let std = libm::sqrt(self.prior_cov[i][3 * k].max(0.0));
+            let m = self.prior[i][k];
+            [
+                (m - FIT_PRIOR_SIGMAS * std).max(bounds[0]),
+                (m + FIT_PRIOR_SIGMAS * std).min(bounds[1]),
+            ]
+        };
+        let (gain_range, drag_range) = (reach(0), reach(1));
         let prior_info = self.prior_information(i);
         let prior_mean = [
             self.start[i][0],
@@ -189,7 +212,7 @@ impl<const NX: usize> FactorWindow<NX> {
         ];
         let mut p = self.fitted[i];
         for _ in 0..FIT_PASSES {
-            let Some(data) = self.frames_information(i, model, &p, r_m2) else {
+            let Some(data) = self.frames_information(i, model, &p, noise) else {
                 return;
             };
             let mut h = prior_info;
@@ -207,13 +230,13 @@ impl<const NX: usize> FactorWindow<NX> {
             for k in 0..P {
                 p[k] += d[k];
             }
-            p[2] = p[2].clamp(bounds[0], bounds[1]);
-            p[3] = p[3].clamp(bounds[0], bounds[1]);
+            p[2] = p[2].clamp(gain_range[0], gain_range[1]);
+            p[3] = p[3].clamp(drag_range[0], drag_range[1]);
             if !p.iter().all(|v| v.is_finite()) {
                 return;
             }
         }
-        let Some(data) = self.frames_information(i, model, &p, r_m2) else {
+        let Some(data) = self.frames_information(i, model, &p, noise) else {
             return;
         };
         // The frames count for less when they scatter more than their
@@ -272,9 +295,9 @@ impl<const NX: usize> FactorWindow<NX> {
         i: usize,
         model: &F,
         p: &[f64; P],
-        r_m2: f64,
+        noise: FitNoise,
     ) -> Option<FramesInformation> {
-        let w = 1.0 / r_m2;
+        let mut t_s = 0.0;
         let mut out = FramesInformation {
             information: [0.0; P * P],
             gradient: [0.0; P],
@@ -286,6 +309,8 @@ impl<const NX: usize> FactorWindow<NX> {
         let mut f = 0;
         for seg in 0..=self.n_segments {
             while f < self.n_frames && self.frame_at[f] == seg {
+                // What the disturbance adds since the start, as if white.
+                let w = 1.0 / (noise.r_m2 + noise.accel_psd * t_s * t_s * t_s / 3.0);
                 let r = self.frames[f][i] - out.end[0];
                 out.chi2 += r * r * w;
                 for a in 0..P {
@@ -312,11 +337,21 @@ impl<const NX: usize> FactorWindow<NX> {
             }
             sens[0][5] += dt;
             out.end = [next[0] + p[5] * dt, next[1]];
+            t_s += dt;
         }
         let finite = out.information.iter().chain(&out.gradient).all(|v| v.is_finite())
             && out.chi2.is_finite();
         finite.then_some(out)
     }
+}
+
+/// What the frames' residuals are made of.
+#[derive(Debug, Clone, Copy)]
+pub struct FitNoise {
+    /// A frame's variance, m^2.
+    pub r_m2: f64,
+    /// The disturbance's acceleration PSD, (m/s^2)^2 s.
+    pub accel_psd: f64,
 }
 
 /// The frames' part of a fit's normal equations.
@@ -465,7 +500,11 @@ mod tests {
         w.start_capsule(1, start.0, start.1, [1.0, 1.0], prior, [0.0; 2], bias_var);
         observe(truth, bias, &mut w);
         for _ in 0..4 {
-            w.fit_capsule(0, &Toy, 1e-10, [0.25, 4.0]);
+            let noise = FitNoise {
+                r_m2: 1e-10,
+                accel_psd: 0.0,
+            };
+            w.fit_capsule(0, &Toy, noise, [0.25, 4.0]);
         }
         w.fitted[0]
     }

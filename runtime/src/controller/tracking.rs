@@ -347,11 +347,15 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             return;
         }
         let model = ModelStep::<S, NX, K>(core::marker::PhantomData);
-        let r_fit = r + SCALE_FRAME_STD_M * SCALE_FRAME_STD_M * FIT_FLOOR_SHARE;
+        let gamma = self.settings.disturbance_bound;
+        let noise = FitNoise {
+            r_m2: r + SCALE_FRAME_STD_M * SCALE_FRAME_STD_M * FIT_FLOOR_SHARE,
+            accel_psd: gamma * gamma * S::DT_S,
+        };
         for i in 0..NX / 2 {
             self.est
                 .window
-                .fit_capsule(i, &model, r_fit, [MODEL_FACTOR_MIN, MODEL_FACTOR_MAX]);
+                .fit_capsule(i, &model, noise, [MODEL_FACTOR_MIN, MODEL_FACTOR_MAX]);
             let p = self.est.window.fitted[i];
             self.est.scales[i].mean = [p[2], p[3]];
             self.est.scales[i].cov = self.est.window.fitted_cov[i];
