@@ -274,7 +274,7 @@ pub const FULL_STATE_SPEED_STD_M_PER_S: f64 = 1.0e-4;
 /// A factor is used once it differs from the model's 1 by this many
 /// standard deviations of its estimate (on the model itself, chance
 /// differences stay below it).
-pub const SCALE_SIGNIFICANCE: f64 = 1.5;
+pub const SCALE_SIGNIFICANCE: f64 = 2.0;
 /// Largest model uncertainty accepted (a factor of two).
 pub const MAX_MODEL_UNCERTAINTY: f64 = 1.0;
 /// Accepted frames after which an estimate counts as established (see
