@@ -112,11 +112,11 @@ impl CapsuleFilter {
 }
 
 /// Per capsule: how it differs from the model, as factors on its magnetic
-/// gain and on its drag (1 = the model), estimated from the frames with the
-/// kinematic filter's innovations (a two-stage filter: the kinematic
-/// filter stays the model's 2-state EKF, this one carries the sensitivity
-/// of its prediction to the factors since the last frame and regresses the
-/// innovation on it).
+/// gain and on its drag (1 = the model): their mean and covariance (from
+/// the fit of a window of frames, `factor_fit`, or under ideal sampling
+/// regressed on each full state's speed), and the sensitivity of the
+/// kinematic estimate to them (the kinematic filter stays the model's
+/// 2-state EKF; when the factors in use change, the estimate moves by it).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ScaleEstimate {
     /// Factors [gain, drag].
@@ -128,7 +128,7 @@ pub struct ScaleEstimate {
     pub sens: [f64; 4],
 }
 
-/// See `ScaleEstimate::update`, m.
+/// The best a frame counts for in the factors' fit (`factor_fit`), m.
 pub const SCALE_FRAME_STD_M: f64 = 3.0e-4;
 
 /// Frames whose innovation the factors' uncertainty does not explain
@@ -162,28 +162,6 @@ impl ScaleEstimate {
         let q = SCALE_DRIFT_PER_S * duration_s.max(0.0);
         self.cov[0] += q;
         self.cov[3] += q;
-    }
-
-    /// Measurement update with the kinematic filter's innovation
-    /// `innovation_m` (frame minus prediction made with factors `used`) of
-    /// variance `s_m2` (its P_xx + R). Returns the change of the factors'
-    /// mean times the sensitivity: the correction (dx, dv) the kinematic
-    /// estimate owes to it.
-    pub fn update(&mut self, innovation_m: f64, s_m2: f64, used: [f64; 2]) -> [f64; 2] {
-        // Each frame counts as if measured to SCALE_FRAME_STD_M at best:
-        // the factors are learned over a move's many frames, so a few
-        // frames of a tracking glitch cannot set them.
-        let h = [self.sens[0], self.sens[1]];
-        let d = self.regress(
-            h,
-            innovation_m,
-            s_m2 + SCALE_FRAME_STD_M * SCALE_FRAME_STD_M,
-            used,
-        );
-        [
-            self.sens[0] * d[0] + self.sens[1] * d[1],
-            self.sens[2] * d[0] + self.sens[3] * d[1],
-        ]
     }
 
     /// Update from a full state (ideal sampling): `speed_innovation` is the

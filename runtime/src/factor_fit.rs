@@ -11,6 +11,9 @@
 //! is fixed-size: when full it restarts from the current estimate with the
 //! fit's factors as its prior.
 
+use capsule_mpc_solver::PlanSolver;
+use core::marker::PhantomData;
+
 /// Segments (constant-gradient stretches between frames) a window holds.
 pub const FIT_SEGMENTS: usize = 96;
 
@@ -55,21 +58,51 @@ pub trait FactorStep {
     ) -> ([f64; 2], [f64; 4], [f64; 6]);
 }
 
+/// What a window starts from, per capsule.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitPrior {
+    /// The state (x m, v m/s) and its covariance (row major 2x2).
+    pub state: [f64; 2],
+    pub state_cov: [f64; 4],
+    /// The factors [gain, drag] and their covariance.
+    pub factors: [f64; 2],
+    pub factors_cov: [f64; 4],
+    /// The steady disturbance [acceleration m/s^2, position rate m/s] and
+    /// its variances.
+    pub bias: [f64; 2],
+    pub bias_var: [f64; 2],
+}
+
+impl FitPrior {
+    /// At rest at 0 on the model, nothing known (replaced before a fit).
+    pub const MODEL: FitPrior = FitPrior {
+        state: [0.0; 2],
+        state_cov: [0.0; 4],
+        factors: [1.0; 2],
+        factors_cov: [0.0; 4],
+        bias: [0.0; 2],
+        bias_var: [0.0; 2],
+    };
+
+    /// The parameters' prior mean (x0, v0, gain, drag, acceleration, rate).
+    fn mean(&self) -> [f64; P] {
+        [
+            self.state[0],
+            self.state[1],
+            self.factors[0],
+            self.factors[1],
+            self.bias[0],
+            self.bias[1],
+        ]
+    }
+}
+
 /// One window of frames and the gradient played between them, and the
 /// fit of every capsule (first M entries) to it.
 #[derive(Debug, Clone)]
 pub struct FactorWindow<const NX: usize> {
-    /// Per capsule: the start state's prior, mean (x, v) and covariance
-    /// (row major 2x2).
-    start: [[f64; 2]; NX],
-    start_cov: [[f64; 4]; NX],
-    /// Per capsule: the factors' prior, mean and covariance.
-    prior: [[f64; 2]; NX],
-    prior_cov: [[f64; 4]; NX],
-    /// Per capsule: the steady disturbance's prior, mean (acceleration
-    /// m/s^2, position rate m/s) and variances.
-    bias_prior: [[f64; 2]; NX],
-    bias_prior_var: [[f64; 2]; NX],
+    /// Per capsule: what is known at the window's start.
+    prior: [FitPrior; NX],
     /// (gradient T/m, duration s) played since the start.
     segments: [[f64; 2]; FIT_SEGMENTS],
     n_segments: usize,
@@ -81,19 +114,12 @@ pub struct FactorWindow<const NX: usize> {
     /// factors' covariance.
     pub fitted: [[f64; P]; NX],
     pub fitted_cov: [[f64; 4]; NX],
-    /// Per capsule: the fitted trajectory's state at the last segment's end.
-    pub fitted_end: [[f64; 2]; NX],
 }
 
 impl<const NX: usize> FactorWindow<NX> {
     pub const fn new() -> Self {
         FactorWindow {
-            start: [[0.0; 2]; NX],
-            start_cov: [[0.0; 4]; NX],
-            prior: [[1.0; 2]; NX],
-            prior_cov: [[0.0; 4]; NX],
-            bias_prior: [[0.0; 2]; NX],
-            bias_prior_var: [[0.0; 2]; NX],
+            prior: [FitPrior::MODEL; NX],
             segments: [[0.0; 2]; FIT_SEGMENTS],
             n_segments: 0,
             frame_at: [0; FIT_FRAMES],
@@ -101,7 +127,6 @@ impl<const NX: usize> FactorWindow<NX> {
             n_frames: 0,
             fitted: [[0.0, 0.0, 1.0, 1.0, 0.0, 0.0]; NX],
             fitted_cov: [[0.0; 4]; NX],
-            fitted_end: [[0.0; 2]; NX],
         }
     }
 
@@ -111,28 +136,11 @@ impl<const NX: usize> FactorWindow<NX> {
         self.n_frames = 0;
     }
 
-    /// Starts capsule `i` at state `mean` (covariance `cov`) with factor
-    /// prior `factors` (covariance `factors_cov`) and a steady
-    /// disturbance of prior mean `bias` ([acceleration m/s^2, position
-    /// rate m/s]) and variances `bias_var`.
-    pub fn start_capsule(
-        &mut self,
-        i: usize,
-        mean: [f64; 2],
-        cov: [f64; 4],
-        factors: [f64; 2],
-        factors_cov: [f64; 4],
-        bias: [f64; 2],
-        bias_var: [f64; 2],
-    ) {
-        self.start[i] = mean;
-        self.start_cov[i] = cov;
-        self.prior[i] = factors;
-        self.prior_cov[i] = factors_cov;
-        self.bias_prior[i] = bias;
-        self.bias_prior_var[i] = bias_var;
-        self.fitted[i] = [mean[0], mean[1], factors[0], factors[1], bias[0], bias[1]];
-        self.fitted_cov[i] = factors_cov;
+    /// Starts capsule `i` from `prior`.
+    pub fn start_capsule(&mut self, i: usize, prior: FitPrior) {
+        self.prior[i] = prior;
+        self.fitted[i] = prior.mean();
+        self.fitted_cov[i] = prior.factors_cov;
     }
 
     /// Whether another segment or frame would not fit.
@@ -149,7 +157,7 @@ impl<const NX: usize> FactorWindow<NX> {
     /// segment when no frame came between and the gradient is the same).
     /// False when the window is full.
     pub fn record_segment(&mut self, u: f64, duration_s: f64) -> bool {
-        if !(duration_s > 0.0) {
+        if duration_s.is_nan() || duration_s <= 0.0 {
             return true;
         }
         let n = self.n_segments;
@@ -193,8 +201,8 @@ impl<const NX: usize> FactorWindow<NX> {
         bounds: [f64; 2],
     ) {
         let reach = |k: usize| {
-            let std = libm::sqrt(self.prior_cov[i][3 * k].max(0.0));
-            let m = self.prior[i][k];
+            let std = libm::sqrt(self.prior[i].factors_cov[3 * k].max(0.0));
+            let m = self.prior[i].factors[k];
             [
                 (m - FIT_PRIOR_SIGMAS * std).max(bounds[0]),
                 (m + FIT_PRIOR_SIGMAS * std).min(bounds[1]),
@@ -202,14 +210,7 @@ impl<const NX: usize> FactorWindow<NX> {
         };
         let (gain_range, drag_range) = (reach(0), reach(1));
         let prior_info = self.prior_information(i);
-        let prior_mean = [
-            self.start[i][0],
-            self.start[i][1],
-            self.prior[i][0],
-            self.prior[i][1],
-            self.bias_prior[i][0],
-            self.bias_prior[i][1],
-        ];
+        let prior_mean = self.prior[i].mean();
         let mut p = self.fitted[i];
         for _ in 0..FIT_PASSES {
             let Some(data) = self.frames_information(i, model, &p, noise) else {
@@ -258,14 +259,13 @@ impl<const NX: usize> FactorWindow<NX> {
         let c0 = cholesky_solve(&l, &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]);
         let c1 = cholesky_solve(&l, &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
         self.fitted[i] = p;
-        self.fitted_end[i] = data.end;
         self.fitted_cov[i] = [c0[2], c1[2], c0[3], c1[3]];
     }
 
     /// The prior's information matrix (4x4, row major): block diagonal in
     /// the start state and the factors.
     fn prior_information(&self, i: usize) -> [f64; P * P] {
-        let s = self.start_cov[i];
+        let s = self.prior[i].state_cov;
         let s = [
             s[0].max(FIT_START_VAR_MIN[0]),
             s[1],
@@ -273,7 +273,7 @@ impl<const NX: usize> FactorWindow<NX> {
             s[3].max(FIT_START_VAR_MIN[1]),
         ];
         let a = inverse2(s);
-        let b = inverse2(self.prior_cov[i]);
+        let b = inverse2(self.prior[i].factors_cov);
         let mut h = [0.0; P * P];
         h[0] = a[0];
         h[1] = a[1];
@@ -283,8 +283,8 @@ impl<const NX: usize> FactorWindow<NX> {
         h[2 * P + 3] = b[1];
         h[3 * P + 2] = b[2];
         h[3 * P + 3] = b[3];
-        h[4 * P + 4] = 1.0 / self.bias_prior_var[i][0].max(FIT_BIAS_VAR_MIN);
-        h[5 * P + 5] = 1.0 / self.bias_prior_var[i][1].max(FIT_BIAS_VAR_MIN);
+        h[4 * P + 4] = 1.0 / self.prior[i].bias_var[0].max(FIT_BIAS_VAR_MIN);
+        h[5 * P + 5] = 1.0 / self.prior[i].bias_var[1].max(FIT_BIAS_VAR_MIN);
         h
     }
 
@@ -305,7 +305,10 @@ impl<const NX: usize> FactorWindow<NX> {
             end: [p[0], p[1]],
         };
         // d(x, v)/d(x0, v0, gain, drag, bias), rows x and v.
-        let mut sens = [[1.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0, 0.0, 0.0]];
+        let mut sens = [
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0, 0.0, 0.0],
+        ];
         let mut f = 0;
         for seg in 0..=self.n_segments {
             while f < self.n_frames && self.frame_at[f] == seg {
@@ -339,7 +342,11 @@ impl<const NX: usize> FactorWindow<NX> {
             out.end = [next[0] + p[5] * dt, next[1]];
             t_s += dt;
         }
-        let finite = out.information.iter().chain(&out.gradient).all(|v| v.is_finite())
+        let finite = out
+            .information
+            .iter()
+            .chain(&out.gradient)
+            .all(|v| v.is_finite())
             && out.chi2.is_finite();
         finite.then_some(out)
     }
@@ -365,6 +372,82 @@ struct FramesInformation {
     end: [f64; 2],
 }
 
+/// The generated model's step (`PlanSolver::capsule_transition_scaled`)
+/// with its sensitivities by differences of the same step.
+pub struct ModelStep<S, const NX: usize, const K: usize>(PhantomData<S>);
+
+impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> ModelStep<S, NX, K> {
+    pub const fn new() -> Self {
+        ModelStep(PhantomData)
+    }
+}
+
+impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Default for ModelStep<S, NX, K> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Step of the constant acceleration in its difference quotient, m/s^2.
+pub const BIAS_STEP_M_PER_S2: f64 = 1.0e-4;
+
+/// Step of the factors in their difference quotients.
+pub const FACTOR_STEP: f64 = 1.0e-3;
+
+impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> FactorStep for ModelStep<S, NX, K> {
+    fn step(
+        &self,
+        i: usize,
+        xv: [f64; 2],
+        u: f64,
+        duration_s: f64,
+        factors: [f64; 2],
+        bias_m_per_s2: f64,
+    ) -> ([f64; 2], [f64; 4], [f64; 6]) {
+        // A constant acceleration on capsule i alone is a gradient offset
+        // in its own step.
+        let per_gradient = factors[0] * S::capsule_gain(i);
+        if per_gradient == 0.0 || per_gradient.is_nan() {
+            let (base, a, b) = factor_step::<S, NX, K>(i, xv, u, duration_s, factors);
+            return (base, a, [b[0], b[1], 0.0, b[2], b[3], 0.0]);
+        }
+        let u_bias = u + bias_m_per_s2 / per_gradient;
+        let (base, a, b) = factor_step::<S, NX, K>(i, xv, u_bias, duration_s, factors);
+        let du = BIAS_STEP_M_PER_S2 / per_gradient;
+        let (c, _) = S::capsule_transition_scaled(i, xv, u_bias + du, duration_s, factors);
+        let dc = [
+            (c[0] - base[0]) / BIAS_STEP_M_PER_S2,
+            (c[1] - base[1]) / BIAS_STEP_M_PER_S2,
+        ];
+        (base, a, [b[0], b[1], dc[0], b[2], b[3], dc[1]])
+    }
+}
+
+/// Capsule `i`'s model step from `mean` over `duration_s` at gradient `u`
+/// with factors `scale`: the next (x, v), its Jacobian in (x, v) and its
+/// sensitivity to the factors (row major; columns gain, drag), by
+/// differences of the same step.
+pub fn factor_step<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
+    i: usize,
+    mean: [f64; 2],
+    u: f64,
+    duration_s: f64,
+    scale: [f64; 2],
+) -> ([f64; 2], [f64; 4], [f64; 4]) {
+    let (base, a) = S::capsule_transition_scaled(i, mean, u, duration_s, scale);
+    let (g, _) =
+        S::capsule_transition_scaled(i, mean, u, duration_s, [scale[0] + FACTOR_STEP, scale[1]]);
+    let (d, _) =
+        S::capsule_transition_scaled(i, mean, u, duration_s, [scale[0], scale[1] + FACTOR_STEP]);
+    let b = [
+        (g[0] - base[0]) / FACTOR_STEP,
+        (d[0] - base[0]) / FACTOR_STEP,
+        (g[1] - base[1]) / FACTOR_STEP,
+        (d[1] - base[1]) / FACTOR_STEP,
+    ];
+    (base, a, b)
+}
+
 impl<const NX: usize> Default for FactorWindow<NX> {
     fn default() -> Self {
         Self::new()
@@ -374,7 +457,7 @@ impl<const NX: usize> Default for FactorWindow<NX> {
 /// Inverse of a symmetric 2x2 (row major); zero when singular.
 fn inverse2(m: [f64; 4]) -> [f64; 4] {
     let det = m[0] * m[3] - m[1] * m[2];
-    if !(det > 0.0) || !det.is_finite() {
+    if det.is_nan() || det <= 0.0 || det.is_infinite() {
         return [0.0; 4];
     }
     [m[3] / det, -m[1] / det, -m[2] / det, m[0] / det]
@@ -391,7 +474,7 @@ fn cholesky(h: &[f64; P * P]) -> Option<[f64; P * P]> {
                 s -= l[r * P + k] * l[c * P + k];
             }
             if r == c {
-                if !(s > 0.0) {
+                if s.is_nan() || s <= 0.0 {
                     return None;
                 }
                 l[r * P + c] = libm::sqrt(s);
@@ -481,7 +564,7 @@ mod tests {
     fn observe(truth: [f64; 2], bias: f64, window: &mut FactorWindow<2>) {
         let mut xv = [0.0, 0.0];
         for k in 0..80 {
-            let u = if k < 20 || k >= 60 { 0.04 } else { -0.04 };
+            let u = if (20..60).contains(&k) { -0.04 } else { 0.04 };
             xv = roll(xv, u, 0.02, truth, bias);
             window.record_segment(u, 0.02);
             if k % 4 == 3 {
@@ -494,10 +577,16 @@ mod tests {
         let mut w = FactorWindow::<2>::new();
         w.clear();
         let prior = [0.01, 0.0, 0.0, 0.04];
-        let start = ([0.0, 0.0], [1e-8, 0.0, 0.0, 1e-8]);
-        let bias_var = [bias_std * bias_std, bias_std * bias_std];
-        w.start_capsule(0, start.0, start.1, [1.0, 1.0], prior, [0.0; 2], bias_var);
-        w.start_capsule(1, start.0, start.1, [1.0, 1.0], prior, [0.0; 2], bias_var);
+        let start = FitPrior {
+            state: [0.0, 0.0],
+            state_cov: [1e-8, 0.0, 0.0, 1e-8],
+            factors: [1.0, 1.0],
+            factors_cov: prior,
+            bias: [0.0; 2],
+            bias_var: [bias_std * bias_std; 2],
+        };
+        w.start_capsule(0, start);
+        w.start_capsule(1, start);
         observe(truth, bias, &mut w);
         for _ in 0..4 {
             let noise = FitNoise {

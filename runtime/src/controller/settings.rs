@@ -264,9 +264,6 @@ pub const MODEL_DRIFT_SPEED_KEPT: f64 = 0.8;
 /// actuation phase (10 samples at u_max: 14 mm for a 10 % gain error), and
 /// tracking glitches beyond it stay recognized as such.
 pub const MODEL_DRIFT_MAX_M: f64 = 0.004;
-/// Step of the finite differences for the gain and drag factors'
-/// sensitivities.
-pub const SCALE_STEP: f64 = 1.0e-3;
 /// Ideal sampling: the speed of a full state counts as measured to this
 /// when it regresses the factors, m/s (one step's speed change is
 /// 1e-3 m/s for a 10 % gain error at full gradient).

@@ -8,7 +8,6 @@ use super::numeric::*;
 use super::settings::*;
 use super::status::*;
 use super::Controller;
-use super::Mode;
 use crate::estimator::*;
 use crate::factor_fit::*;
 use capsule_mpc_solver::*;
@@ -192,7 +191,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                     self.est.replaced = self.est.filters;
                     self.est.has_replaced = true;
                 }
-                self.update_scales(z, r);
+                self.shrink_factor_sensitivity(r);
                 update_filters(&mut self.est.filters[..m], z, r);
                 self.fit_factors(z, r);
                 self.refresh_applied_scales();
@@ -300,16 +299,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
     }
 
-    /// The gain and drag factors from an accepted frame `z` (before the
-    /// kinematic update, whose innovation they regress).
-    pub(super) fn update_scales(&mut self, z: &[f64], r: f64) {
-        for (i, &zi) in z.iter().enumerate().take(NX / 2) {
+    /// The kinematic update of an accepted frame takes part of the
+    /// innovation into the estimate: the factors' sensitivity (which moves
+    /// the estimate when the factors in use change) shrinks alike.
+    pub(super) fn shrink_factor_sensitivity(&mut self, r: f64) {
+        for i in 0..NX / 2 {
             let f = self.est.filters[i];
             let s = f.cov[0] + r;
-            let innovation = zi - f.mean[0];
-            if !BATCH_FIT {
-                self.est.scales[i].update(innovation, s, self.est.applied_scales[i]);
-            }
             self.est.scales[i].after_kinematic_update([f.cov[0] / s, f.cov[2] / s]);
         }
     }
@@ -318,50 +314,50 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// estimate its prior.
     pub(super) fn restart_factor_window(&mut self) {
         self.est.window.clear();
-        let gamma = self.settings.disturbance_bound;
+        let var = sq(self.settings.disturbance_bound);
         for i in 0..NX / 2 {
             let (f, s) = (self.est.filters[i], self.est.scales[i]);
             let fitted = self.est.window.fitted[i];
-            let bias = [fitted[4], fitted[5]];
-            let var = gamma * gamma;
-            self.est
-                .window
-                .start_capsule(i, f.mean, f.cov, s.mean, s.cov, bias, [var, var]);
+            let prior = FitPrior {
+                state: f.mean,
+                state_cov: f.cov,
+                factors: s.mean,
+                factors_cov: s.cov,
+                // The steady disturbance carries over; its size is the
+                // disturbance bound's.
+                bias: [fitted[4], fitted[5]],
+                bias_var: [var, var],
+            };
+            self.est.window.start_capsule(i, prior);
         }
     }
 
     /// Adds accepted frame `z` to the window and refits every capsule's
-    /// factors to it; they become the factors' estimate.
+    /// factors to the window's frames; the fit becomes the factors'
+    /// estimate. A full window starts again from the current estimate.
     pub(super) fn fit_factors(&mut self, z: &[f64], r: f64) {
-        if !BATCH_FIT {
-            return;
-        }
-        if HOLD_RESTART && self.sup.mode == Mode::Hold {
-            // At rest the frames say little about the factors and much
-            // about a steady disturbance the fit does not model.
-            self.restart_factor_window();
-            return;
-        }
         if !self.est.window.record_frame(z) {
             self.restart_factor_window();
             return;
         }
-        let model = ModelStep::<S, NX, K>(core::marker::PhantomData);
         let gamma = self.settings.disturbance_bound;
         let noise = FitNoise {
-            r_m2: r + SCALE_FRAME_STD_M * SCALE_FRAME_STD_M * FIT_FLOOR_SHARE,
+            // Each frame counts as if measured to SCALE_FRAME_STD_M at
+            // best: a few frames of a tracking glitch cannot set the
+            // factors.
+            r_m2: r + SCALE_FRAME_STD_M * SCALE_FRAME_STD_M,
             accel_psd: gamma * gamma * S::DT_S,
         };
         for i in 0..NX / 2 {
-            self.est
-                .window
-                .fit_capsule(i, &model, noise, [MODEL_FACTOR_MIN, MODEL_FACTOR_MAX]);
+            self.est.window.fit_capsule(
+                i,
+                &ModelStep::<S, NX, K>::new(),
+                noise,
+                [MODEL_FACTOR_MIN, MODEL_FACTOR_MAX],
+            );
             let p = self.est.window.fitted[i];
             self.est.scales[i].mean = [p[2], p[3]];
             self.est.scales[i].cov = self.est.window.fitted_cov[i];
-            if FIT_SPEED && self.est.window.frames() >= 3 {
-                self.est.filters[i].mean[1] = self.est.window.fitted_end[i][1];
-            }
         }
     }
 
@@ -458,7 +454,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
         };
         let m = NX / 2;
-        if BATCH_FIT && !self.est.window.record_segment(u, duration_s) {
+        if !self.est.window.record_segment(u, duration_s) {
             self.restart_factor_window();
             self.est.window.record_segment(u, duration_s);
         }
@@ -491,69 +487,4 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 .all(|f| f.position_std_m() <= REPLACED_TRACK_MAX_STD_M);
         }
     }
-}
-
-/// Experiment switch.
-pub(super) const BATCH_FIT: bool = true;
-pub(super) const FIT_FLOOR_SHARE: f64 = 1.0;
-const BIAS_STEP_M_PER_S2: f64 = 1.0e-4;
-pub(super) const FIT_SPEED: bool = false;
-pub(super) const HOLD_RESTART: bool = false;
-
-/// The model's step with its factor sensitivity, for the factor fit.
-struct ModelStep<S, const NX: usize, const K: usize>(core::marker::PhantomData<S>);
-
-impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> FactorStep for ModelStep<S, NX, K> {
-    fn step(
-        &self,
-        i: usize,
-        xv: [f64; 2],
-        u: f64,
-        duration_s: f64,
-        factors: [f64; 2],
-        bias_m_per_s2: f64,
-    ) -> ([f64; 2], [f64; 4], [f64; 6]) {
-        // A constant acceleration on capsule i alone is a gradient offset
-        // in its own step.
-        let per_gradient = factors[0] * S::capsule_gain(i);
-        let u_bias = if per_gradient != 0.0 {
-            bias_m_per_s2 / per_gradient
-        } else {
-            0.0
-        };
-        let (base, a, b) = factor_step::<S, NX, K>(i, xv, u + u_bias, duration_s, factors);
-        let du = BIAS_STEP_M_PER_S2 / per_gradient;
-        let (c, _) =
-            S::capsule_transition_scaled(i, xv, u + u_bias + du, duration_s, factors);
-        let dc = [
-            (c[0] - base[0]) / BIAS_STEP_M_PER_S2,
-            (c[1] - base[1]) / BIAS_STEP_M_PER_S2,
-        ];
-        (base, a, [b[0], b[1], dc[0], b[2], b[3], dc[1]])
-    }
-}
-
-/// Capsule `i`'s model step from `mean` over `duration_s` at gradient `u`
-/// with factors `scale`: the next (x, v), its Jacobian in (x, v) and its
-/// sensitivity to the factors (row major; columns gain, drag), by
-/// differences of the same step.
-fn factor_step<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
-    i: usize,
-    mean: [f64; 2],
-    u: f64,
-    duration_s: f64,
-    scale: [f64; 2],
-) -> ([f64; 2], [f64; 4], [f64; 4]) {
-    let (base, a) = S::capsule_transition_scaled(i, mean, u, duration_s, scale);
-    let (g, _) =
-        S::capsule_transition_scaled(i, mean, u, duration_s, [scale[0] + SCALE_STEP, scale[1]]);
-    let (d, _) =
-        S::capsule_transition_scaled(i, mean, u, duration_s, [scale[0], scale[1] + SCALE_STEP]);
-    let b = [
-        (g[0] - base[0]) / SCALE_STEP,
-        (d[0] - base[0]) / SCALE_STEP,
-        (g[1] - base[1]) / SCALE_STEP,
-        (d[1] - base[1]) / SCALE_STEP,
-    ];
-    (base, a, b)
 }
