@@ -4,10 +4,13 @@
 //! and one window QP of the active-set engine. Each starts from the warm case
 //! of `capsule-mpc bench` (a first solve, `shift(1)`, the predicted next
 //! state), on states of scenario C's closed loop and one uniform state.
+//! Last, the factor fit's worst case: every capsule refitted to a full
+//! window of frames (what one accepted frame can cost at most).
 
 use capsule_mpc::bench::engine::Timed;
 use capsule_mpc::bench::harness::prototype_controller;
 use capsule_mpc::bench::peers::PeerSolver;
+use capsule_mpc_runtime::factor_fit::{FactorWindow, FitNoise, FitPrior, ModelStep, FIT_FRAMES};
 use capsule_mpc_runtime::generated::controller::{spec, Solver};
 use capsule_mpc_runtime::solver::qp::{ActiveSet, QpEngine};
 use capsule_mpc_runtime::solver::PlanSolver;
@@ -68,5 +71,68 @@ fn benches(c: &mut Criterion) {
     }
 }
 
-criterion_group!(step, benches);
+/// A full window (`FIT_FRAMES` frames, two segments between frames:
+/// actuation, then the tracking gap, which fills `FIT_SEGMENTS` too):
+/// bang-bang out and back, on a plant whose gain and drag are
+/// 10 % and 20 % off the model so that the fit has to move.
+fn full_window() -> FactorWindow<{ spec::NX }> {
+    let mut window = FactorWindow::new();
+    window.clear();
+    let prior = FitPrior {
+        state: [0.0; 2],
+        state_cov: [1e-8, 0.0, 0.0, 1e-8],
+        factors: [1.0; 2],
+        factors_cov: [0.01, 0.0, 0.0, 0.04],
+        bias: [0.0; 2],
+        bias_var: [1e-6; 2],
+    };
+    let truth = [1.1, 1.2];
+    let mut xv = [[0.0; 2]; spec::M];
+    for i in 0..spec::M {
+        window.start_capsule(i, prior);
+    }
+    for frame in 0..FIT_FRAMES {
+        let u = if frame < FIT_FRAMES / 2 { 1.0 } else { -1.0 } * spec::U_MAX_T_PER_M;
+        for (gradient, duration_s) in [(u, spec::DT_S), (0.0, spec::TRACKING_TIME_S)] {
+            for (i, state) in xv.iter_mut().enumerate() {
+                *state =
+                    Solver::capsule_transition_scaled(i, *state, gradient, duration_s, truth).0;
+            }
+            window.record_segment(gradient, duration_s);
+        }
+        let mut z = [0.0; spec::NX];
+        for (zi, state) in z.iter_mut().zip(&xv) {
+            *zi = state[0];
+        }
+        window.record_frame(&z);
+    }
+    assert!(window.is_full() && window.frames() == FIT_FRAMES);
+    window
+}
+
+fn factor_fit(c: &mut Criterion) {
+    let window = full_window();
+    let noise = FitNoise {
+        r_m2: 1e-8,
+        accel_psd: 0.05 * 0.05 * spec::DT_S,
+    };
+    c.bench_function("factor_fit/full_window", |b| {
+        b.iter_batched_ref(
+            || window.clone(),
+            |w| {
+                for i in 0..spec::M {
+                    w.fit_capsule(
+                        i,
+                        &ModelStep::<Solver, { spec::NX }, { spec::K }>::new(),
+                        noise,
+                        [0.25, 4.0],
+                    );
+                }
+            },
+            BatchSize::SmallInput,
+        )
+    });
+}
+
+criterion_group!(step, benches, factor_fit);
 criterion_main!(step);

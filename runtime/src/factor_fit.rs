@@ -3,13 +3,12 @@
 //! to every accepted frame since the window's start, with the gradient
 //! that was played between them known.
 //!
-//! The recursive estimate (`estimator::ScaleEstimate`) regresses each
-//! frame's innovation once, linearized where the estimate was then, while
-//! the kinematic filter absorbs most of the same innovation into the
-//! state; a move's frames identify the factors several times better when
-//! refitted together along one trajectory (docs/decisions.md). The window
-//! is fixed-size: when full it restarts from the current estimate with the
-//! fit's factors as its prior.
+//! Why a window and not a per-frame update: regressed once, linearized
+//! where the estimate was then, a frame's innovation goes mostly into the
+//! kinematic filter's state; refitted together along one trajectory, a
+//! move's frames identify the factors better (docs/decisions.md, "Factors
+//! fitted to a window of frames"). The window is fixed-size: when full it
+//! restarts from the current estimate with the fit's factors as its prior.
 
 use capsule_mpc_solver::PlanSolver;
 use core::marker::PhantomData;
@@ -262,7 +261,7 @@ impl<const NX: usize> FactorWindow<NX> {
         self.fitted_cov[i] = [c0[2], c1[2], c0[3], c1[3]];
     }
 
-    /// The prior's information matrix (4x4, row major): block diagonal in
+    /// The prior's information matrix (6x6, row major): block diagonal in
     /// the start state and the factors.
     fn prior_information(&self, i: usize) -> [f64; P * P] {
         let s = self.prior[i].state_cov;
