@@ -7,7 +7,11 @@ and five plants off it. Per row: unsettled runs, median / 90th percentile /
 worst settle (9.00 stands for never) and the true frames rejected.
 
     cargo build --release
-    python3 docs/scripts/mismatch_grid.py target/release/capsule-mpc [N]
+    python3 docs/scripts/mismatch_grid.py target/release/capsule-mpc [N] [--told STD]
+
+With `--told STD` every plant's controller is told the plant's own factors
+with deviation STD (`--calibrated-*-scale`, `--calibrated-std`; the model
+is told 1).
 """
 import statistics
 import sys
@@ -30,11 +34,27 @@ def run(binary, sampling, extra, target, seed):
     return d["metrics"]["settle_time_s"], d["frames"]["rejected"], d["frames"]["received"]
 
 
+def told(extra, std):
+    """`extra` with the controller told the plant's factors at `std`."""
+    drag = extra[extra.index("--plant-drag-scale") + 1] if "--plant-drag-scale" in extra else "1"
+    gain = extra[extra.index("--plant-gain-scale") + 1] if "--plant-gain-scale" in extra else "1"
+    return extra + ["--calibrated-drag-scale", drag, "--calibrated-gain-scale", gain,
+                    "--calibrated-std", std]
+
+
 def main():
-    binary = sys.argv[1]
-    seeds = range(1, int(sys.argv[2]) + 1) if len(sys.argv) > 2 else range(1, 9)
+    args = sys.argv[1:]
+    told_std = None
+    if "--told" in args:
+        k = args.index("--told")
+        told_std = args[k + 1]
+        del args[k:k + 2]
+    binary = args[0]
+    seeds = range(1, int(args[1]) + 1) if len(args) > 1 else range(1, 9)
     for sampling in ("constant", "variable"):
         for name, extra in PLANTS:
+            if told_std is not None:
+                extra = told(extra, told_std)
             jobs = [(binary, sampling, extra, t, s) for t in TARGETS for s in seeds]
             with ThreadPoolExecutor(2) as ex:
                 res = list(ex.map(lambda a: run(*a), jobs))
