@@ -286,10 +286,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             std_devs[1] * std_devs[1],
         ];
         self.refresh_applied_scales();
-        self.restart_factor_window();
         if self.est.at_start {
             self.seed_start_speeds();
         }
+        // After the seeding: the window starts from the speeds' new
+        // uncertainty.
+        self.restart_factor_window();
         Ok(())
     }
 

@@ -131,8 +131,8 @@ pub struct ScaleEstimate {
 /// The best a frame counts for in the factors' fit (`factor_fit`), m.
 pub const SCALE_FRAME_STD_M: f64 = 3.0e-4;
 
-/// Frames whose innovation the factors' uncertainty does not explain
-/// (normalized innovation squared above this, 3 sigma) do not update them.
+/// Full states whose speed innovation the factors' uncertainty does not
+/// explain (normalized innovation squared above this) do not update them.
 pub const SCALE_UPDATE_NIS: f64 = 2.0;
 
 /// Random walk of the factors, per second (variance): they are constants
@@ -175,21 +175,15 @@ impl ScaleEstimate {
     }
 
     /// The scalar regression of `innovation` = h . (factors - used) + noise
-    /// of variance `noise_var` (the factors' part added here); returns the
-    /// change of the factors' mean. Innovations the factors' uncertainty
-    /// does not explain (`SCALE_UPDATE_NIS`) change nothing.
-    fn regress(
-        &mut self,
-        h: [f64; 2],
-        innovation: f64,
-        noise_var: f64,
-        used: [f64; 2],
-    ) -> [f64; 2] {
+    /// of variance `noise_var` (the factors' part added here).
+    /// Innovations the factors' uncertainty does not explain
+    /// (`SCALE_UPDATE_NIS`) change nothing.
+    fn regress(&mut self, h: [f64; 2], innovation: f64, noise_var: f64, used: [f64; 2]) {
         let p = self.cov;
         let ph = [p[0] * h[0] + p[1] * h[1], p[2] * h[0] + p[3] * h[1]];
         let s = noise_var + h[0] * ph[0] + h[1] * ph[1];
         if s.is_nan() || s <= 0.0 {
-            return [0.0, 0.0];
+            return;
         }
         // The prediction used `used`, not the mean: what the mean predicts
         // on top of it is part of the expected innovation.
@@ -198,12 +192,11 @@ impl ScaleEstimate {
         if r * r / s > SCALE_UPDATE_NIS {
             // Farther than the factors' own uncertainty explains: a
             // tracking glitch or a disturbance, not the capsule's constants.
-            return [0.0, 0.0];
+            return;
         }
         let k = [ph[0] / s, ph[1] / s];
-        let d = [k[0] * r, k[1] * r];
-        self.mean[0] += d[0];
-        self.mean[1] += d[1];
+        self.mean[0] += k[0] * r;
+        self.mean[1] += k[1] * r;
         self.cov = [
             p[0] - k[0] * ph[0],
             p[1] - k[0] * ph[1],
@@ -213,7 +206,6 @@ impl ScaleEstimate {
         let off = 0.5 * (self.cov[1] + self.cov[2]);
         self.cov[1] = off;
         self.cov[2] = off;
-        d
     }
 
     /// The kinematic update with gains `k` (position, speed) took part of

@@ -269,9 +269,14 @@ pub const MODEL_DRIFT_MAX_M: f64 = 0.004;
 /// 1e-3 m/s for a 10 % gain error at full gradient).
 pub const FULL_STATE_SPEED_STD_M_PER_S: f64 = 1.0e-4;
 /// A factor is used once it differs from the model's 1 by this many
-/// standard deviations of its estimate (on the model itself, chance
-/// differences stay below it).
+/// standard deviations of its estimate. On the model itself chance
+/// differences pass it now and then, and the refinement then plans on a
+/// factor within a few of its deviations of 1; used later, a factor off
+/// the model comes too late for the first arrival (docs/decisions.md).
 pub const SCALE_SIGNIFICANCE: f64 = 2.0;
+/// The factor fit's prior on a steady position rate: what the disturbance
+/// bound adds to the speed in this time, s.
+pub const FIT_RATE_PRIOR_TIME_S: f64 = 1.0;
 /// Largest model uncertainty accepted (a factor of two).
 pub const MAX_MODEL_UNCERTAINTY: f64 = 1.0;
 /// Accepted frames after which an estimate counts as established (see

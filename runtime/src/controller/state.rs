@@ -65,8 +65,9 @@ pub(super) struct Estimation<const NX: usize> {
     /// the estimate differs from the model significantly).
     pub scales: [ScaleEstimate; NX],
     pub applied_scales: [[f64; 2]; NX],
-    /// The frames and gradients since the move's start, to which the
-    /// factors are fitted.
+    /// The frames and gradients to which the factors are fitted: since
+    /// the target was set, the track re-acquired or the last window
+    /// filled (sized by NX, of which the first M entries are used).
     pub window: FactorWindow<NX>,
     /// Re-acquisition candidate: a filter started at the first gated-out
     /// frame and updated with the gated-out frames that agree with it, so

@@ -314,7 +314,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// estimate its prior.
     pub(super) fn restart_factor_window(&mut self) {
         self.est.window.clear();
-        let var = sq(self.settings.disturbance_bound);
+        let gamma = self.settings.disturbance_bound;
+        // The steady disturbance is at most the disturbance bound, and a
+        // position rate at most what it adds in FIT_RATE_PRIOR_TIME_S.
+        let bias_var = [sq(gamma), sq(gamma * FIT_RATE_PRIOR_TIME_S)];
         for i in 0..NX / 2 {
             let (f, s) = (self.est.filters[i], self.est.scales[i]);
             let fitted = self.est.window.fitted[i];
@@ -323,10 +326,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 state_cov: f.cov,
                 factors: s.mean,
                 factors_cov: s.cov,
-                // The steady disturbance carries over; its size is the
-                // disturbance bound's.
+                // The steady disturbance carries over.
                 bias: [fitted[4], fitted[5]],
-                bias_var: [var, var],
+                bias_var,
             };
             self.est.window.start_capsule(i, prior);
         }
@@ -337,6 +339,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// estimate. A full window starts again from the current estimate.
     pub(super) fn fit_factors(&mut self, z: &[f64], r: f64) {
         if !self.est.window.record_frame(z) {
+            // Not reached: a window is restarted as soon as it is full.
             self.restart_factor_window();
             return;
         }
@@ -356,8 +359,19 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 [MODEL_FACTOR_MIN, MODEL_FACTOR_MAX],
             );
             let p = self.est.window.fitted[i];
+            // The fit holds the factors constant over the window; their
+            // allowed drift (SCALE_DRIFT_PER_S) over it adds on top.
+            let drift = SCALE_DRIFT_PER_S * self.est.window.span_s();
+            let mut cov = self.est.window.fitted_cov[i];
+            cov[0] += drift;
+            cov[3] += drift;
             self.est.scales[i].mean = [p[2], p[3]];
-            self.est.scales[i].cov = self.est.window.fitted_cov[i];
+            self.est.scales[i].cov = cov;
+        }
+        // The next frame goes into a new window (this one's frames are in
+        // the estimate it starts from).
+        if self.est.window.is_full() {
+            self.restart_factor_window();
         }
     }
 
