@@ -250,8 +250,8 @@ fn off_grid_targets_settle() {
 /// for every run within 2x of its schedule's minimum time (the coasted
 /// bound under constant sampling where the tables have it, else the ideal
 /// one), which is not met (docs/known-limits.md, "Three capsules"):
-/// measured, of 40 runs each, constant sampling 40 settle, 36 within 2x;
-/// variable 39 settle, 35 within 2x. Asserted as floors against
+/// measured, of 40 runs each, constant sampling 40 settle, 38 within 2x;
+/// variable 40 settle, 35 within 2x. Asserted as floors against
 /// regressions: at least 40 and 38 runs settle, 34 and 33 within 2x.
 #[test]
 fn scanner_sampling_settles_with_noise_and_disturbance() {
