@@ -4,7 +4,7 @@
 use crate::estimator::{CapsuleFilter, ScaleEstimate, INITIAL_SPEED_STD_M_PER_S};
 use crate::switching::{
     extra_deviation_bound, paper_actuation_samples, propagate_error_box, tight_actuation_samples,
-    PaperConstants, TightInputs,
+    widen_error_box, PaperConstants, TightInputs,
 };
 use capsule_mpc_solver::shooting::{
     SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S, SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S,
@@ -277,6 +277,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         {
             return Err(RuntimeError::BadSetting("std_devs"));
         }
+        self.est.told_factors[capsule] = factors;
         let scale = &mut self.est.scales[capsule];
         scale.mean = factors;
         scale.cov = [
@@ -719,6 +720,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
         let mut boxes = start;
         let gamma_dt = self.settings.disturbance_bound * S::DT_S;
+        // Near the target on capsules the frames have shown to be off the
+        // factors the loop was given, the factors' remaining uncertainty
+        // grows the error too.
+        let cautious = (0..NX / 2).all(|i| libm::fabs(e[2 * i]) < ARRIVAL_REGION_M)
+            && (0..NX / 2).any(|i| {
+                self.est.scales[i].differs_from(self.est.told_factors[i], SCALE_SIGNIFICANCE)
+            });
         let mut state = *e;
         for (k, &u) in plan.iter().enumerate() {
             costs[k] = S::stage_cost(&state, u);
@@ -731,6 +739,14 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             for i in 0..NX / 2 {
                 let (_, a) = S::capsule_transition(i, [state[2 * i], state[2 * i + 1]], u, S::DT_S);
                 boxes[i] = propagate_error_box(&a, boxes[i], gamma_dt);
+                if cautious {
+                    let model_error = self.est.scales[i].model_error_accel(
+                        self.est.applied_scales[i],
+                        S::capsule_gain(i) * u,
+                        S::capsule_drag(i, state[2 * i + 1]),
+                    );
+                    boxes[i] = widen_error_box(boxes[i], model_error, S::DT_S);
+                }
             }
             deviation[k] = extra_deviation_bound(&boxes[..NX / 2], &start[..NX / 2]);
             state = S::predict_plan(&state, &single(u), 1);

@@ -221,10 +221,7 @@ impl ScaleEstimate {
     }
 
     /// Process noise (acceleration PSD, (m/s^2)^2 s) for the model's error
-    /// when predicting with factors `applied` at magnetic acceleration
-    /// `magnetic_m_per_s2` and drag acceleration `drag_m_per_s2`: each
-    /// factor may be off by its distance from the estimate plus one
-    /// standard deviation, read as white over `correlation_s`. Near rest
+    /// (`model_error_accel`) read as white over `correlation_s`. Near rest
     /// both accelerations are small and the prediction is nearly exact.
     pub fn model_error_psd(
         &self,
@@ -233,10 +230,31 @@ impl ScaleEstimate {
         drag_m_per_s2: f64,
         correlation_s: f64,
     ) -> f64 {
+        let a = self.model_error_accel(applied, magnetic_m_per_s2, drag_m_per_s2);
+        a * a * correlation_s
+    }
+
+    /// How far off, m/s^2, the acceleration predicted with factors
+    /// `applied` may be at magnetic acceleration `magnetic_m_per_s2` and
+    /// drag acceleration `drag_m_per_s2`: each factor may be off by its
+    /// distance from the estimate plus one standard deviation.
+    pub fn model_error_accel(
+        &self,
+        applied: [f64; 2],
+        magnetic_m_per_s2: f64,
+        drag_m_per_s2: f64,
+    ) -> f64 {
         let err =
             |k: usize| libm::fabs(self.mean[k] - applied[k]) + libm::sqrt(self.cov[3 * k].max(0.0));
-        let a = err(0) * libm::fabs(magnetic_m_per_s2) + err(1) * libm::fabs(drag_m_per_s2);
-        a * a * correlation_s
+        err(0) * libm::fabs(magnetic_m_per_s2) + err(1) * libm::fabs(drag_m_per_s2)
+    }
+
+    /// Whether either factor is more than `sigmas` standard deviations
+    /// from `factors`.
+    pub fn differs_from(&self, factors: [f64; 2], sigmas: f64) -> bool {
+        (0..2).any(|k| {
+            libm::fabs(self.mean[k] - factors[k]) > sigmas * libm::sqrt(self.cov[3 * k].max(0.0))
+        })
     }
 
     /// The factors to use: each where it differs from the model by more

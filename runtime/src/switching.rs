@@ -83,6 +83,14 @@ pub fn propagate_error_box(a: &[f64; 4], box_xv: [f64; 2], gamma_dt: f64) -> [f6
     ]
 }
 
+/// Widens an error box `(dx, dv)` by an acceleration error
+/// `accel_m_per_s2` held over `dt_s` (the model's own error, which the
+/// disturbance bound does not cover).
+pub fn widen_error_box(box_xv: [f64; 2], accel_m_per_s2: f64, dt_s: f64) -> [f64; 2] {
+    let a = libm::fabs(accel_m_per_s2);
+    [box_xv[0] + 0.5 * a * dt_s * dt_s, box_xv[1] + a * dt_s]
+}
+
 /// Extra deviation after n samples: the part of the propagated error box
 /// that exceeds the box at the measurement (component-wise, >= 0), as a
 /// Euclidean norm over all capsules. Tracking now would reset the error to

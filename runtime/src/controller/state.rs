@@ -65,6 +65,9 @@ pub(super) struct Estimation<const NX: usize> {
     /// the estimate differs from the model significantly).
     pub scales: [ScaleEstimate; NX],
     pub applied_scales: [[f64; 2]; NX],
+    /// The factors the loop was given: the model's (1), or a calibration
+    /// (`Controller::set_model_factors`).
+    pub told_factors: [[f64; 2]; NX],
     /// The frames and gradients to which the factors are fitted: since
     /// the target was set, the track re-acquired or the last window
     /// filled (sized by NX, of which the first M entries are used).
@@ -104,6 +107,7 @@ impl<const NX: usize> Estimation<NX> {
             model_drift: [[0.0; 2]; NX],
             scales: [ScaleEstimate::new(gain_uncertainty, drag_uncertainty); NX],
             applied_scales: [[1.0, 1.0]; NX],
+            told_factors: [[1.0, 1.0]; NX],
             window: FactorWindow::new(),
             candidate: [CapsuleFilter::new(0.0, 0.0); NX],
             candidate_frames: 0,
