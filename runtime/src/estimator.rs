@@ -336,6 +336,23 @@ mod tests {
         );
     }
 
+    /// Which capsules the switching rule treats as off the factors the
+    /// loop was given: a factor more than the asked deviations from the
+    /// told value (the model's 1 or a calibration), either way.
+    #[test]
+    fn differs_from_counts_deviations_from_the_told_factors() {
+        let mut s = ScaleEstimate::new(0.1, 0.2);
+        s.cov = [0.01 * 0.01, 0.0, 0.0, 0.02 * 0.02];
+        s.mean = [1.0, 0.95];
+        // The drag 2.5 deviations below the model's 1.
+        assert!(s.differs_from([1.0, 1.0], 2.0));
+        assert!(!s.differs_from([1.0, 1.0], 3.0));
+        // Told 0.96: half a deviation off, not significant.
+        assert!(!s.differs_from([1.0, 0.96], 2.0));
+        s.mean = [1.025, 0.96];
+        assert!(s.differs_from([1.0, 0.96], 2.0), "the gain, upwards");
+    }
+
     /// A lost measurement: predict only, the uncertainty widens, the next
     /// measurement shrinks it again.
     #[test]

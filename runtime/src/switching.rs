@@ -177,6 +177,46 @@ mod tests {
         assert_eq!(n, 4);
     }
 
+    /// The model's error held over a sample widens the box by a v t and
+    /// a t^2 / 2, and a box that grows faster shortens the tight rule's
+    /// phase on the same plan.
+    #[test]
+    fn the_models_error_widens_the_box_and_shortens_the_phase() {
+        let b = widen_error_box([1e-4, 1e-3], -0.5, 0.02);
+        assert!((b[0] - (1e-4 + 0.5 * 0.5 * 4e-4)).abs() < 1e-15, "{b:?}");
+        assert!((b[1] - (1e-3 + 0.5 * 0.02)).abs() < 1e-15, "{b:?}");
+        let a = [1.0, 0.02, 0.0, 1.0];
+        let start = [[1e-4, 1e-3]];
+        let deviation = |accel: f64| -> [f64; 10] {
+            let mut bx = start;
+            core::array::from_fn(|_| {
+                bx[0] = widen_error_box(propagate_error_box(&a, bx[0], 1e-5), accel, 0.02);
+                extra_deviation_bound(&bx, &start)
+            })
+        };
+        let costs = [1e-3; 10];
+        let grads = [0.1; 10];
+        let (model, off) = (deviation(0.0), deviation(0.5));
+        let phase = |d: &[f64; 10]| {
+            tight_actuation_samples(
+                &TightInputs {
+                    stage_costs: &costs,
+                    cost_gradients: &grads,
+                    extra_deviation: d,
+                    q_max: 1.0,
+                    sigma: 0.9,
+                },
+                10,
+            )
+        };
+        assert!(
+            phase(&off) < phase(&model),
+            "{} vs {}",
+            phase(&off),
+            phase(&model)
+        );
+    }
+
     #[test]
     fn tight_rule_extends_when_far_and_shortens_when_close() {
         let far = [1.0; 10];
