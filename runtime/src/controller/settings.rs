@@ -172,10 +172,10 @@ impl ControllerSettings {
 /// Within this distance of their targets (every capsule), m, and once
 /// the learned factors differ from the ones the loop was given (the
 /// model's, or a calibration's) by `SCALE_SIGNIFICANCE` deviations, the
-/// switching rule counts the factors' remaining
-/// uncertainty in how far the state may stray from the plan open loop:
-/// the phases that end a move set the relative speed of the arrival,
-/// which the hold cannot remove (docs/decisions.md).
+/// switching rule counts the factors' remaining uncertainty in how far
+/// the state may stray from the plan open loop: the phases that end a
+/// move set the relative speed of the arrival, which the hold cannot
+/// remove (docs/decisions.md).
 pub const ARRIVAL_REGION_M: f64 = 20e-3;
 
 /// Under the scanner cycle, shots are looked for only while some capsule is
