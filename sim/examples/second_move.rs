@@ -8,7 +8,8 @@
 //! within the +-5 cm workspace): the first move of a session starts there
 //! at rest; the second arrives there from the origin first (3 s) and is
 //! then given the same target. Prints the strict settle's median, 90th
-//! percentile and worst of each (9 s: never), from the move's start.
+//! percentile and worst of each (9 s: never), from the move's start, and
+//! how many never settled.
 //!
 //!     cargo run --release -p capsule-mpc-sim --example second_move -- DRAG GAIN constant|variable
 use capsule_mpc_generator::config::Config;
@@ -89,6 +90,8 @@ fn main() {
             }
         }
     }
+    let never = |v: &[f64]| v.iter().filter(|&&t| t >= 9.0).count();
+    let (never_first, never_second) = (never(&firsts), never(&seconds));
     let stat = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         (v[v.len() / 2], v[v.len() * 9 / 10], v[v.len() - 1], v.len())
@@ -102,5 +105,8 @@ fn main() {
         "drag {drag} gain {gain} {:?}: second move                        {:?}",
         sampling,
         stat(&mut seconds)
+    );
+    println!(
+        "drag {drag} gain {gain} {sampling:?}: never settled: first move {never_first}, second move {never_second}"
     );
 }
