@@ -252,25 +252,26 @@ impl ScaleEstimate {
     /// Whether either factor is more than `sigmas` standard deviations
     /// from `factors`.
     pub fn differs_from(&self, factors: [f64; 2], sigmas: f64) -> bool {
-        (0..2).any(|k| {
-            libm::fabs(self.mean[k] - factors[k]) > sigmas * libm::sqrt(self.cov[3 * k].max(0.0))
-        })
+        (0..2).any(|k| self.factor_differs(k, factors[k], sigmas))
     }
 
     /// The factors to use: each where it differs from the model by more
     /// than `sigmas` standard deviations, else the model's 1.
     pub fn significant(&self, sigmas: f64) -> [f64; 2] {
-        let pick = |m: f64, var: f64| {
-            if libm::fabs(m - 1.0) > sigmas * libm::sqrt(var.max(0.0)) {
-                m
+        let pick = |k: usize| {
+            if self.factor_differs(k, 1.0, sigmas) {
+                self.mean[k]
             } else {
                 1.0
             }
         };
-        [
-            pick(self.mean[0], self.cov[0]),
-            pick(self.mean[1], self.cov[3]),
-        ]
+        [pick(0), pick(1)]
+    }
+
+    /// Whether factor `k` (0 gain, 1 drag) is more than `sigmas` standard
+    /// deviations from `value`.
+    fn factor_differs(&self, k: usize, value: f64, sigmas: f64) -> bool {
+        libm::fabs(self.mean[k] - value) > sigmas * libm::sqrt(self.cov[3 * k].max(0.0))
     }
 }
 
