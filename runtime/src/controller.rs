@@ -551,8 +551,15 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// returns the phase length to play.
     fn replan_for_phase(&mut self, x: &[f64; NX], e: &[f64; NX], n: usize, n_max: usize) -> usize {
         let (samples, coast_s) = self.settings.schedule_with_gap(n, self.est.gap_s);
+        let solved_for = self.law.planned_phase_samples;
+        let in_flight = self.solver.shot_samples() > 0;
         self.law.planned_phase_samples = n;
         if !self.solver.reschedule_shot(e, samples, coast_s) {
+            if in_flight && NX / 2 >= SHOT_KEEPS_PHASES_FROM_CAPSULES {
+                // The shot, its schedule and its plan are as they were.
+                self.law.planned_phase_samples = solved_for;
+                return solved_for.min(n);
+            }
             self.update_schedule();
             if self.solver.solve(e).status == SolveStatus::OutOfRange {
                 return n;
