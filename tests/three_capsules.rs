@@ -252,7 +252,7 @@ fn off_grid_targets_settle() {
 /// one), which is not met (docs/known-limits.md, "Three capsules"):
 /// measured, of 40 runs each, constant sampling 40 settle, 38 within 2x;
 /// variable 40 settle, 37 within 2x. Asserted as floors against
-/// regressions: at least 40 and 39 runs settle, 34 and 35 within 2x.
+/// regressions: at least 40 and 39 runs settle, 34 and 36 within 2x.
 #[test]
 fn scanner_sampling_settles_with_noise_and_disturbance() {
     let config = three();
@@ -312,7 +312,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
     for (sampling, settled, within_2x) in summaries {
         let (settle_floor, within_2x_floor) = match sampling {
             Sampling::Constant => (40, 34),
-            _ => (39, 35),
+            _ => (39, 36),
         };
         assert!(
             settled >= settle_floor && within_2x >= within_2x_floor,
@@ -320,6 +320,33 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
             sampling.name()
         );
     }
+}
+
+/// Under variable sampling the first frames choose 1-sample phases and the
+/// shot is solved for them; when the switching rule asks for longer ones
+/// that the shot does not converge on, the shot flies on with its own
+/// phases. Dropped for the refinement, (3, 3, 3) cm, seed 2 swung about
+/// the start for 1.3 s and settled at 1.80 s (2.1x its 0.86 s bound);
+/// kept, 1.16 s.
+#[test]
+fn a_shot_that_cannot_take_longer_phases_keeps_its_own() {
+    let config = three();
+    let model = Model::from_config(&config);
+    let mut opts = RunOptions::new(
+        &config,
+        vec![0.03, 0.0, 0.03, 0.0, 0.03, 0.0],
+        Sampling::Variable,
+    );
+    opts.duration_s = RUN_S;
+    opts.seed = 2;
+    opts.disturbance = DisturbanceLevel::Paper.config_of_kind(&model, 2, DisturbanceKind::Random);
+    let m = run(&config, &opts).unwrap().metrics;
+    let bound_s = m.min_time_bound_s.unwrap();
+    let settle_s = m.settle_time_s.expect("settles");
+    assert!(
+        settle_s <= 1.5 * bound_s,
+        "settled at {settle_s} s against a {bound_s} s bound"
+    );
 }
 
 /// The sparse index keeps a small part of the dense grid for three
