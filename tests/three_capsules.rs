@@ -250,9 +250,9 @@ fn off_grid_targets_settle() {
 /// for every run within 2x of its schedule's minimum time (the coasted
 /// bound under constant sampling where the tables have it, else the ideal
 /// one), which is not met (docs/known-limits.md, "Three capsules"):
-/// measured, of 40 runs each, constant sampling 40 settle, 38 within 2x;
-/// variable 40 settle, 37 within 2x. Asserted as floors against
-/// regressions: at least 40 and 39 runs settle, 34 and 36 within 2x.
+/// measured, of 40 runs each, constant sampling 40 settle, 36 within 2x;
+/// variable 40 settle, 39 within 2x. Asserted as floors against
+/// regressions: at least 40 and 39 runs settle, 34 and 37 within 2x.
 #[test]
 fn scanner_sampling_settles_with_noise_and_disturbance() {
     let config = three();
@@ -312,7 +312,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
     for (sampling, settled, within_2x) in summaries {
         let (settle_floor, within_2x_floor) = match sampling {
             Sampling::Constant => (40, 34),
-            _ => (39, 36),
+            _ => (39, 37),
         };
         assert!(
             settled >= settle_floor && within_2x >= within_2x_floor,

@@ -7,7 +7,8 @@ use crate::switching::{
     widen_error_box, PaperConstants, TightInputs,
 };
 use capsule_mpc_solver::shooting::{
-    SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S, SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S,
+    SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S, SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S,
+    SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S,
 };
 use capsule_mpc_solver::{PlanSolver, SolveReport, SolveStatus, Tier};
 
@@ -102,6 +103,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // (see the constants).
         c.solver.set_shot_speed_tolerance(match settings.sampling {
             Sampling::Ideal => SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S,
+            Sampling::Constant | Sampling::Variable if NX / 2 >= 3 => {
+                SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S
+            }
             Sampling::Constant | Sampling::Variable => SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S,
         });
         c.reset(positions_m)?;

@@ -34,6 +34,12 @@ pub const SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S: f64 = 2e-4;
 /// the 1 cm grid, variable sampling, seeds 1-8, 5e-4 -> 1e-4 took the runs
 /// above 2x the minimum time from 49 to 38 of 640 (docs/decisions.md).
 pub const SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S: f64 = 1e-4;
+/// The same for three capsules and more, m/s, where the tighter aim
+/// measured slower (`tests/three_capsules.rs`' scanner runs, seeds 1-8,
+/// 1e-4 -> 2e-4: medians 1.80 -> 1.56 s constant, 1.74 -> 1.60 s
+/// variable, unsettled runs over the 1 cm and 1.5 cm grids 19 -> 14;
+/// docs/decisions.md).
+pub const SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S: f64 = 2e-4;
 
 /// The position tolerance a shot in flight falls back to when it no
 /// longer converges to `SHOT_POSITION_TOLERANCE_M`, m: inside the hold's
