@@ -326,8 +326,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
 /// shot is solved for them; when the switching rule asks for longer ones
 /// that the shot does not converge on, the shot flies on with its own
 /// phases. Dropped for the refinement, (3, 3, 3) cm, seed 2 swung about
-/// the start for 1.3 s and settled at 1.80 s (2.1x its 0.86 s bound);
-/// kept, 1.16 s.
+/// the start and settled at 1.74 s (2.0x its 0.86 s bound); kept, 1.16 s.
 #[test]
 fn a_shot_that_cannot_take_longer_phases_keeps_its_own() {
     let config = three();

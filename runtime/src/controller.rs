@@ -103,7 +103,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // (see the constants).
         c.solver.set_shot_speed_tolerance(match settings.sampling {
             Sampling::Ideal => SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S,
-            Sampling::Constant | Sampling::Variable if NX / 2 >= 3 => {
+            Sampling::Constant | Sampling::Variable if NX / 2 >= SHOTS_CARRY_FROM_CAPSULES => {
                 SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S
             }
             Sampling::Constant | Sampling::Variable => SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S,
@@ -559,7 +559,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let in_flight = self.solver.shot_samples() > 0;
         self.law.planned_phase_samples = n;
         if !self.solver.reschedule_shot(e, samples, coast_s) {
-            if in_flight && NX / 2 >= SHOT_KEEPS_PHASES_FROM_CAPSULES {
+            if in_flight && NX / 2 >= SHOTS_CARRY_FROM_CAPSULES {
                 // The shot, its schedule and its plan are as they were.
                 self.law.planned_phase_samples = solved_for;
                 return solved_for.min(n);

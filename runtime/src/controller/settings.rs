@@ -182,14 +182,16 @@ pub const ARRIVAL_REGION_M: f64 = 20e-3;
 /// farther than this from its target, m (see `Controller::shooting_wanted`).
 pub const SHOT_SCANNER_BEYOND_M: f64 = 3e-3;
 
-/// Under variable sampling, from this many capsules a shot that cannot be
+/// From this many capsules the minimum-time shots carry the moves under
+/// the scanner cycle: the refinement of their stored plans (1 cm apart,
+/// from rest, no explicit tier) is a poor fallback from a moving state
+/// (it swung three capsules about the start for up to 1.3 s before a shot
+/// was found again). So under variable sampling a shot that cannot be
 /// re-solved for longer actuation phases keeps flying on the phases it
-/// was solved for, rather than being dropped for the refinement. The
-/// three-capsule refinement from a moving state (stored plans 1 cm apart,
-/// from rest) swung the capsules about the start for up to 1.3 s before a
-/// shot was found again; with two, the refinement plays the longer phases
-/// and is faster (docs/decisions.md).
-pub const SHOT_KEEPS_PHASES_FROM_CAPSULES: usize = 3;
+/// was solved for, and a tracked shot aims at
+/// `SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S`. With two capsules both
+/// measured slower or mixed (docs/decisions.md).
+pub const SHOTS_CARRY_FROM_CAPSULES: usize = 3;
 
 /// Default hold entry: 0.7 of the 1 mm settle tolerance, m.
 pub const HOLD_ENTER_POSITION_M: f64 = 0.7e-3;
