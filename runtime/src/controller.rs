@@ -418,13 +418,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         };
         out.estimate[..NX].copy_from_slice(x);
         self.sup.mode = self.next_mode(x);
-        let e = self.relative(x, &self.sup.target);
+        let mut e = self.relative(x, &self.sup.target);
         match self.sup.mode {
             Mode::NoTarget => out.status = RuntimeStatus::NoTarget,
             Mode::Hold => self.hold_step(&e, &mut out),
             Mode::Brake => self.brake_step(x, &mut out),
             Mode::Plan | Mode::Fallback => {
-                let report = self.solve_step(&e);
+                let report = self.solve_step(x, &mut e);
                 out.solve = Some(report);
                 self.sup.mode = Mode::after_solve(&report);
                 if self.sup.mode == Mode::Fallback {
@@ -455,7 +455,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// `Plan`, first half: shift the plan by what was played, restart it
     /// from the tables when creeping (not while a shot flies), and refine
     /// or re-shoot it from `e`.
-    fn solve_step(&mut self, e: &[f64; NX]) -> SolveReport {
+    fn solve_step(&mut self, x: &[f64; NX], e: &mut [f64; NX]) -> SolveReport {
         self.solver.shift(self.law.applied_samples);
         self.solver.start_cycle();
         self.solver.set_shooting(self.shooting_wanted(e));
@@ -465,7 +465,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             // that creeps on the quadratic cost can take seconds.
             self.solver.reset();
         }
-        self.refine_plan(e)
+        let report = self.refine_plan(e);
+        if report.status != SolveStatus::OutOfRange && self.shoot_through_legs(x, e) {
+            *e = self.relative(x, &self.sup.target);
+        }
+        report
     }
 
     /// Whether the solver should look for minimum-time shots from `e` (see

@@ -280,6 +280,121 @@ pub fn chain_time_s<const NX: usize>(t: &Tables, use_tables: bool, d: &[f64; NX]
     }
 }
 
+/// Most legs a chain of stored plans takes (the generator's chains stay
+/// well below; a bound keeps the walk finite on any table).
+pub const MAX_CHAIN_LEGS: usize = 8;
+
+/// One plan through a chain of stored legs into `out` (zero after): the
+/// samples `head` plays first (a shot in flight to the chain's first
+/// waypoint; none from rest), then the chain from displacement `d =
+/// x_start - x_target` (positions; speeds ignored), each leg's plan cut at
+/// `arrival(plan, start)` (the sample from which its rollout from rest at
+/// `start`, relative to its own target, stays in the settle band; above
+/// `K`: none), the whole compressed in time into `K` samples when longer
+/// (nearest sample). Returns the chain's length in samples (the plan holds
+/// all of it, or the whole compressed). A start for one shot to the final
+/// target: rest-to-rest legs compose (the dynamics do not depend on
+/// position), so on the model the uncompressed plan ends in the band of
+/// the chain's end, within half a leg lattice step of the target; the
+/// compressed one is a guess the shot corrects. None without tables or a
+/// chain, where a leg's plan does not arrive, or where the plan would be a
+/// single stored plan from rest (no head, one leg).
+pub fn chain_plan<const NX: usize, const K: usize>(
+    t: &Tables,
+    use_tables: bool,
+    head: (&[f64; K], usize),
+    d: &[f64; NX],
+    coasted: bool,
+    mut arrival: impl FnMut(&[f64; K], &[f64; NX]) -> usize,
+    out: &mut [f64; K],
+) -> Option<usize> {
+    if !use_tables {
+        return None;
+    }
+    let (set, min_time) = if coasted {
+        (PlanSet::Coasted, Section::CoastedPlanMinTime)
+    } else {
+        (PlanSet::BackToBack, Section::PlanMinTime)
+    };
+    if t.elements(min_time) == 0 {
+        return None;
+    }
+    let (head, head_samples) = (head.0, head.1.min(K));
+    // The chain's legs: each one's plan and samples.
+    let mut legs = [(0usize, 0usize); MAX_CHAIN_LEGS];
+    let mut count = 0;
+    let mut total = head_samples;
+    let mut rest = *d;
+    loop {
+        let cell = leg_cell(t, &rest)?;
+        if t.f64_at(Section::ChainTime, cell) == 0.0 {
+            // Within half a lattice step of the target: the chain ends.
+            break;
+        }
+        let plan = t.u16_at(Section::FirstLeg, cell) as usize;
+        if plan >= t.plan_count || count == MAX_CHAIN_LEGS {
+            return None;
+        }
+        if !t.f64_at(min_time, plan).is_finite() {
+            return None;
+        }
+        // The plan's grid point, the last capsule fastest.
+        let axis = t.plan_axis;
+        let mut start = [0.0; NX];
+        let mut flat = plan;
+        let mut i = NX / 2;
+        while i > 0 {
+            i -= 1;
+            start[2 * i] = axis.start + (flat % axis.count) as f64 * axis.step;
+            rest[2 * i] -= start[2 * i];
+            flat /= axis.count;
+        }
+        let mut u = [0.0; K];
+        let mut k = 0;
+        while k < K {
+            u[k] = t.plan_u(set, plan, k);
+            k += 1;
+        }
+        let samples = arrival(&u, &start);
+        if samples > K {
+            return None;
+        }
+        legs[count] = (plan, samples);
+        count += 1;
+        total += samples;
+    }
+    if total == 0 || (head_samples == 0 && count < 2) {
+        return None;
+    }
+    let n = total.min(K);
+    let mut k = 0;
+    while k < K {
+        out[k] = 0.0;
+        if k < n {
+            // Sample k of the (compressed) plan is sample `at` of the chain.
+            let mut at = if total > K {
+                (k * total + total / 2) / n
+            } else {
+                k
+            };
+            out[k] = if at < head_samples {
+                head[at]
+            } else {
+                at -= head_samples;
+                let mut leg = 0;
+                while leg + 1 < count && at >= legs[leg].1 {
+                    at -= legs[leg].1;
+                    leg += 1;
+                }
+                let (plan, samples) = legs[leg];
+                t.plan_u(set, plan, at.min(samples.saturating_sub(1)))
+            };
+        }
+        k += 1;
+    }
+    Some(total)
+}
+
 /// How far a displacement may lie from a plan grid point and still count
 /// as that point's move, m (rounding of lattice targets such as 0.03).
 const ON_PLAN_GRID_M: f64 = 1e-9;

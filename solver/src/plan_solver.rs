@@ -66,6 +66,11 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// Moves a shot in flight to a new schedule, arriving when it did
     /// (see `Solver::reschedule_shot`); false leaves everything as it was.
     fn reschedule_shot(&mut self, e: &[f64; NX], samples_per_phase: usize, coast_s: f64) -> bool;
+    /// On a leg to a waypoint (`e_leg` relative to it, `e_final` to the
+    /// final target): one shot to the final target through the rest of the
+    /// chain (see `Solver::shoot_through_chain`); true when one converges
+    /// (the plan is that shot), else nothing changes.
+    fn shoot_through_chain(&mut self, e_leg: &[f64; NX], e_final: &[f64; NX]) -> bool;
     /// Refines the plan from relative state `e` (SQP on the nonlinear
     /// model). A plan from `solve_explicit` since the last call competes
     /// on its true cost, so the result never costs more than it.
@@ -181,6 +186,9 @@ impl<
     }
     fn reschedule_shot(&mut self, e: &[f64; NX], samples_per_phase: usize, coast_s: f64) -> bool {
         Solver::reschedule_shot(self, e, samples_per_phase, coast_s)
+    }
+    fn shoot_through_chain(&mut self, e_leg: &[f64; NX], e_final: &[f64; NX]) -> bool {
+        Solver::shoot_through_chain(self, e_leg, e_final)
     }
     fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
         Solver::solve(self, e)

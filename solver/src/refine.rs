@@ -11,7 +11,7 @@
 //! The explicit tier (`explicit`) gives a first answer without a rollout.
 
 use crate::explicit::explicit_plan;
-use crate::lookup::{lookup_fine, lookup_tail_for};
+use crate::lookup::{chain_plan, lookup_fine, lookup_tail_for};
 use crate::qp::{clamp_u, ActiveSet, BoxQp, QpEngine};
 use crate::report::{SolveReport, SolveStatus, Tier};
 use crate::rollout::{

@@ -2,6 +2,7 @@
 //! through waypoints (chained rest-to-rest plans, see the generator's
 //! `legs`).
 
+use super::braking::at_rest;
 use super::settings::*;
 use super::Controller;
 use capsule_mpc_solver::*;
@@ -42,6 +43,28 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 self.sup.target[2 * i + 1] = 0.0;
             }
         }
+    }
+
+    /// On a waypoint leg (`e` relative to the waypoint), shots on: one
+    /// shot from `x` to the final target through the rest of the chain
+    /// (see `PlanSolver::shoot_through_chain`), flown without stopping at
+    /// the waypoints. True when it converges: the move is on its last leg.
+    pub(super) fn shoot_through_legs(&mut self, x: &[f64; NX], e: &[f64; NX]) -> bool {
+        if self.sup.on_last_leg || !self.shooting_wanted(e) {
+            return false;
+        }
+        // Without a shot in flight the chain starts here, from rest.
+        if self.solver.shot_samples() == 0 && !at_rest(x) {
+            return false;
+        }
+        let e_final = self.relative(x, &self.sup.final_target);
+        if !self.solver.shoot_through_chain(e, &e_final) {
+            return false;
+        }
+        self.sup.on_last_leg = true;
+        self.sup.recovering = false;
+        self.sup.target = self.sup.final_target;
+        true
     }
 
     /// On a waypoint leg: once the capsules are near the waypoint, nearly at

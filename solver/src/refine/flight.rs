@@ -220,6 +220,70 @@ impl<
         }
     }
 
+    /// On a leg to a waypoint of a chain (`e_leg` relative to the
+    /// waypoint, `e_final` to the final target): one shot to the final
+    /// target through the rest of the chain, seeded from the shot in
+    /// flight to the waypoint (none: the state must be at rest) followed by
+    /// the chain's stored plans from there (`lookup::chain_plan`), then
+    /// shortened. The legs stop at each waypoint; the shot does not. True
+    /// when one converges: the plan is that shot, to the final target.
+    /// False leaves the plan as it was.
+    pub fn shoot_through_chain(&mut self, e_leg: &[f64; NX], e_final: &[f64; NX]) -> bool {
+        if !self.shooting {
+            return false;
+        }
+        let (schedule, scales) = (self.schedule, self.scales);
+        let shooter = &mut self.shooter;
+        // Each leg's plan is cut where its own rollout enters the band for
+        // good (one rollout of the plan, from the cycle's budget).
+        let arrival = |u: &[f64; K], start: &[f64; NX]| {
+            if !shooter.spend(K) {
+                return K + 1;
+            }
+            shooter.settle_sample::<S>(start, u, &schedule, &scales)
+        };
+        // The chain continues from the waypoint, or from here at rest.
+        let head = self.shot_samples;
+        let mut d = *e_final;
+        if head > 0 {
+            let mut i = 0;
+            while i < NX / 2 {
+                d[2 * i] = e_final[2 * i] - e_leg[2 * i];
+                i += 1;
+            }
+        }
+        let mut seed = [0.0; K];
+        let Some(total) = chain_plan::<NX, K>(
+            &S::TABLES,
+            S::USE_TABLES,
+            (&self.plan, head),
+            &d,
+            schedule.coasted(),
+            arrival,
+            &mut seed,
+        ) else {
+            return false;
+        };
+        let n = total.min(K);
+        if !self.shooter.shoot::<S>(
+            e_final,
+            &mut seed,
+            n,
+            SHOT_ITERATIONS,
+            &self.schedule,
+            &self.scales,
+        ) {
+            return false;
+        }
+        let best = self.shorten_shot(e_final, &mut seed, n, 0, SHOT_MAX_LENGTHS);
+        self.plan = seed;
+        self.shot_samples = best;
+        self.has_plan = true;
+        self.explicit_ready = false;
+        self.tier = Tier::Refined;
+        true
+    }
+
     /// Bisects for the shortest length in `lo + 1..best` whose shot from
     /// `e`, started from `p` (converged at `best`) compressed in time,
     /// converges, trying at most `tries` lengths. `p` becomes that shot;
