@@ -49,8 +49,17 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// shot from `x` to the final target through the rest of the chain
     /// (see `PlanSolver::shoot_through_chain`), flown without stopping at
     /// the waypoints. True when it converges: the move is on its last leg.
+    /// Under the scanner cycle from `SHOTS_CARRY_FROM_CAPSULES` capsules
+    /// only: two capsules' legs let the estimator learn the factors before
+    /// the final approach, and off the model their shot through arrived
+    /// with relative speeds the hold could not stop (worst settles up to
+    /// 1.1 s later, docs/decisions.md).
     pub(super) fn shoot_through_legs(&mut self, x: &[f64; NX], e: &[f64; NX]) -> bool {
-        if self.sup.on_last_leg || !self.shooting_wanted(e) {
+        let scanner = self.settings.sampling != Sampling::Ideal;
+        if self.sup.on_last_leg
+            || !self.shooting_wanted(e)
+            || (scanner && NX / 2 < SHOTS_CARRY_FROM_CAPSULES)
+        {
             return false;
         }
         // Without a shot in flight the chain starts here, from rest.

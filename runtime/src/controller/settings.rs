@@ -188,8 +188,10 @@ pub const SHOT_SCANNER_BEYOND_M: f64 = 3e-3;
 /// (it swung three capsules about the start for up to 1.3 s before a shot
 /// was found again). So under variable sampling a shot that cannot be
 /// re-solved for longer actuation phases keeps flying on the phases it
-/// was solved for, and a tracked shot aims at
-/// `SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S`. With two capsules both
+/// was solved for, a tracked shot aims at
+/// `SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S`, and a chained move flies
+/// one shot through its waypoints (`Controller::shoot_through_legs`; with
+/// fewer capsules only under ideal sampling). With two capsules all three
 /// measured slower or mixed (docs/decisions.md).
 pub const SHOTS_CARRY_FROM_CAPSULES: usize = 3;
 
