@@ -492,10 +492,6 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
             }
             out
         };
-        if std::env::var("CAPSULE_TRACE").is_ok() {
-            let st: Vec<String> = plant.state().iter().map(|v| format!("{:.2}", v * 1000.0)).collect();
-            eprintln!("t {:.3} {} shot {} last {} n {} {:?} x {:?} u0 {:.4}", plant.time_s(), ctl.mode().name(), ctl.shot_samples(), ctl.on_last_leg(), out.actuation_samples, out.status, st, out.gradients_t_per_m[0]);
-        }
         if modes.last().map(|m: &ModeChange| m.mode.as_str()) != Some(ctl.mode().name()) {
             modes.push(ModeChange {
                 t_s: plant.time_s(),
