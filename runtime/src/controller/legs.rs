@@ -1,6 +1,7 @@
 //! Legs of a move: a target one stored plan does not reach is reached
 //! through waypoints (chained rest-to-rest plans, see the generator's
-//! `legs`).
+//! `legs`), or, once a shot through them converges, without stopping at
+//! them (`shoot_through_legs`).
 
 use super::braking::at_rest;
 use super::settings::*;

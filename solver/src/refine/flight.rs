@@ -1,7 +1,8 @@
 //! A minimum-time shot in flight: looking for one (`acquire_shot`),
 //! re-solving it every cycle from the estimate (`reshoot`, falling back to
-//! the hold's entry tolerance), and moving it to a new schedule
-//! (`reschedule_shot`).
+//! the hold's entry tolerance), moving it to a new schedule
+//! (`reschedule_shot`), and carrying a chained move through its waypoints
+//! (`shoot_through_chain`).
 
 use super::*;
 
