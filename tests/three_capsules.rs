@@ -7,6 +7,7 @@ use capsule_mpc_generator::generate::ControllerModule;
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::generated::{controller, three_capsules};
 use capsule_mpc_sim::closed_loop::{compiled_controller_for, run, RunOptions, Sampling};
+use capsule_mpc_sim::metrics::Metrics;
 use capsule_mpc_sim::plant::DisturbanceLevel;
 use capsule_mpc_sim::reach::{reach_map, ReachOptions, ReachPoint, ReachSummary};
 
@@ -17,6 +18,23 @@ fn cm(v: &[f64]) -> Vec<f64> {
 /// Run length, s: long enough for the slowest chained moves (minimum-time
 /// bounds up to 3.7 s) and the end game's re-plans.
 const RUN_S: f64 = 8.0;
+
+/// One `RUN_S` run of the three-capsule preset from rest at the origin to
+/// `target_cm` (at rest); with `seed`, the paper's random disturbance and
+/// that seed, else the default seed and no disturbance.
+fn run_to(target_cm: [f64; 3], sampling: Sampling, seed: Option<u64>) -> Metrics {
+    let config = three();
+    let state: Vec<f64> = target_cm.iter().flat_map(|&p| [p / 100.0, 0.0]).collect();
+    let mut opts = RunOptions::new(&config, state, sampling);
+    opts.duration_s = RUN_S;
+    if let Some(seed) = seed {
+        let model = Model::from_config(&config);
+        opts.seed = seed;
+        opts.disturbance =
+            DisturbanceLevel::Paper.config_of_kind(&model, seed, DisturbanceKind::Random);
+    }
+    run(&config, &opts).unwrap().metrics
+}
 
 fn three() -> Config {
     Config::embedded_three_capsules()
@@ -258,8 +276,6 @@ fn off_grid_targets_settle() {
 /// 1.56 and 1.60 s). Asserted: every run settles within 2x.
 #[test]
 fn scanner_sampling_settles_with_noise_and_disturbance() {
-    let config = three();
-    let model = Model::from_config(&config);
     let targets_cm: [[f64; 3]; 10] = [
         [1.0, 1.0, 1.0],
         [3.0, 3.0, 3.0],
@@ -279,13 +295,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
         let mut within_2x = 0;
         for t in targets_cm {
             for seed in 1..=4 {
-                let state: Vec<f64> = t.iter().flat_map(|&p| [p / 100.0, 0.0]).collect();
-                let mut opts = RunOptions::new(&config, state, sampling);
-                opts.duration_s = RUN_S;
-                opts.seed = seed;
-                opts.disturbance =
-                    DisturbanceLevel::Paper.config_of_kind(&model, seed, DisturbanceKind::Random);
-                let m = run(&config, &opts).unwrap().metrics;
+                let m = run_to(t, sampling, Some(seed));
                 let label = format!("{t:?} cm seed {seed}");
                 let bound_s = m
                     .schedule_min_time_s
@@ -328,17 +338,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
 /// the start and settled at 1.74 s (2.0x its 0.86 s bound); kept, 1.16 s.
 #[test]
 fn a_shot_that_cannot_take_longer_phases_keeps_its_own() {
-    let config = three();
-    let model = Model::from_config(&config);
-    let mut opts = RunOptions::new(
-        &config,
-        vec![0.03, 0.0, 0.03, 0.0, 0.03, 0.0],
-        Sampling::Variable,
-    );
-    opts.duration_s = RUN_S;
-    opts.seed = 2;
-    opts.disturbance = DisturbanceLevel::Paper.config_of_kind(&model, 2, DisturbanceKind::Random);
-    let m = run(&config, &opts).unwrap().metrics;
+    let m = run_to([3.0, 3.0, 3.0], Sampling::Variable, Some(2));
     let bound_s = m.min_time_bound_s.unwrap();
     let settle_s = m.settle_time_s.expect("settles");
     assert!(
@@ -402,14 +402,7 @@ fn the_sparse_index_scales_with_the_plans() {
 /// does not stop: 1.22 s. Asserted: within 1.15x the chain's time.
 #[test]
 fn a_move_through_waypoints_does_not_stop_at_them() {
-    let config = three();
-    let mut opts = RunOptions::new(
-        &config,
-        vec![0.005, 0.0, -0.02, 0.0, -0.005, 0.0],
-        Sampling::Ideal,
-    );
-    opts.duration_s = RUN_S;
-    let m = run(&config, &opts).unwrap().metrics;
+    let m = run_to([0.5, -2.0, -0.5], Sampling::Ideal, None);
     let bound_s = m.min_time_bound_s.unwrap();
     let settle_s = m.settle_time_s.expect("settles");
     assert!(
