@@ -411,6 +411,63 @@ fn a_move_through_waypoints_does_not_stop_at_them() {
     );
 }
 
+/// Where a chain cuts each leg is stored with the plan
+/// (`Section::PlanSettle`, `Section::CoastedPlanSettle`), computed by the
+/// generator from its own rollouts: it must be where the runtime's model,
+/// played on each set's schedule (constant sampling: a coast after every
+/// sample), stays in the settle band, for every plan of both sets.
+#[test]
+fn stored_settle_samples_match_the_runtime_rollout() {
+    use capsule_mpc_runtime::solver::format::{Section, NO_SETTLE, SCALAR_COAST_S};
+    use capsule_mpc_runtime::solver::tables::PlanSet;
+    use capsule_mpc_runtime::solver::PlanSolver;
+    type Three = three_capsules::Solver;
+    const NX: usize = three_capsules::spec::NX;
+    const K: usize = three_capsules::spec::K;
+    let t = &three_capsules::TABLES;
+    let coast_s = t.scalar(SCALAR_COAST_S);
+    assert!(coast_s > 0.0, "the preset has constant sampling's plans");
+    let in_band =
+        |e: &[f64; NX]| (0..NX / 2).all(|c| e[2 * c].abs() <= 1e-3 && e[2 * c + 1].abs() <= 5e-3);
+    let mut compared = 0;
+    for (set, section, coast) in [
+        (PlanSet::BackToBack, Section::PlanSettle, 0.0),
+        (PlanSet::Coasted, Section::CoastedPlanSettle, coast_s),
+    ] {
+        for p in 0..t.plan_count {
+            // The plan's grid point, the last capsule fastest.
+            let mut e = [0.0; NX];
+            let mut flat = p;
+            for c in (0..NX / 2).rev() {
+                e[2 * c] = t.plan_axis.start + (flat % t.plan_axis.count) as f64 * t.plan_axis.step;
+                flat /= t.plan_axis.count;
+            }
+            let mut last_out = None;
+            for k in 0..=K {
+                if !in_band(&e) {
+                    last_out = Some(k);
+                }
+                if k < K {
+                    let mut one = [0.0; K];
+                    one[0] = t.plan_u(set, p, k);
+                    e = <Three as PlanSolver<NX, K>>::predict_plan(&e, &one, 1);
+                    if coast > 0.0 {
+                        e = <Three as PlanSolver<NX, K>>::predict_constant(&e, 0.0, coast);
+                    }
+                }
+            }
+            let expected = match last_out {
+                None => 0,
+                Some(K) => NO_SETTLE,
+                Some(k) => k as u16 + 1,
+            };
+            assert_eq!(t.u16_at(section, p), expected, "plan {p} of {set:?}");
+            compared += 1;
+        }
+    }
+    assert_eq!(compared, 2 * 343);
+}
+
 /// The chain of stored legs played back to back as one plan, the start of
 /// the shot through the waypoints (`lookup::chain_plan`): rest-to-rest legs
 /// compose, so from rest at every displacement of the 1 cm lattice that
@@ -426,14 +483,6 @@ fn chained_legs_played_back_to_back_arrive() {
     const K: usize = three_capsules::spec::K;
     let in_band =
         |e: &[f64; NX]| (0..NX / 2).all(|c| e[2 * c].abs() <= 1e-3 && e[2 * c + 1].abs() <= 5e-3);
-    // Each leg's plan is cut where its rollout enters the band for good.
-    let arrival = |u: &[f64; K], start: &[f64; NX]| {
-        (0..=K)
-            .rev()
-            .take_while(|&k| in_band(&<Three as PlanSolver<NX, K>>::predict_plan(start, u, k)))
-            .last()
-            .unwrap_or(K + 1)
-    };
     let (mut chains, mut checked) = (0, 0);
     let mut missed = Vec::new();
     for i in 0..343 {
@@ -452,7 +501,6 @@ fn chained_legs_played_back_to_back_arrive() {
             (&[0.0; K], 0),
             &d,
             false,
-            arrival,
             &mut plan,
         ) else {
             continue;

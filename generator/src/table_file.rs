@@ -8,6 +8,7 @@ use crate::config::Config;
 use crate::explicit::ExplicitTables;
 use crate::grid::{unflatten, Axis, PlanEntry};
 use crate::legs::{LegTable, NO_LEG};
+use crate::mintime::{arrival_sample, SETTLE_BAND};
 use crate::ocp::{OcpWeights, Plan};
 use crate::tables::{
     config_hash, hex, CoastedTables, FineTables, SwitchingConstants, TableError, TableHeader,
@@ -42,6 +43,15 @@ fn grid_axis(a: format::Axis) -> Axis {
         start: a.start,
         step: a.step,
         count: a.count,
+    }
+}
+
+/// The sample from which a stored plan's states stay in the settle band
+/// (`format::NO_SETTLE` when its last state is outside).
+fn settle_sample(states: &[Vec<f64>]) -> u16 {
+    match arrival_sample(states, &SETTLE_BAND) {
+        Some(k) => u16::try_from(k).unwrap_or(format::NO_SETTLE),
+        None => format::NO_SETTLE,
     }
 }
 
@@ -92,6 +102,7 @@ pub fn encode(
             Section::PlanMinTime,
             Section::PlanStates,
             Section::PlanMeta,
+            Section::PlanSettle,
         ),
         (
             &t.coasted.plans,
@@ -100,9 +111,10 @@ pub fn encode(
             Section::CoastedPlanMinTime,
             Section::CoastedPlanStates,
             Section::CoastedPlanMeta,
+            Section::CoastedPlanSettle,
         ),
     ];
-    for (plans, u, reached, min_time, states, meta) in plan_sets {
+    for (plans, u, reached, min_time, states, meta, settle) in plan_sets {
         for p in plans.iter() {
             assert_eq!(p.plan.u.len(), k, "plan length");
             assert_eq!(p.plan.states.len(), k + 1, "plan states");
@@ -119,6 +131,7 @@ pub fn encode(
                 p.plan.iterations as u32,
                 p.arrival_samples as u32,
             );
+            w.u16s(settle, [settle_sample(&p.plan.states)]);
         }
     }
     w.u64s(Section::IndexCells, t.index_cells.iter().copied());

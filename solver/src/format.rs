@@ -18,7 +18,7 @@
 /// First eight bytes of every table file.
 pub const MAGIC: [u8; 8] = *b"CMPCTBL\0";
 /// The layout version this build reads and writes.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 /// Bytes of the fixed header before the directory.
 pub const HEADER_BYTES: usize = 64;
 /// Bytes of one directory entry.
@@ -71,6 +71,8 @@ pub const NO_SLOT: u16 = u16::MAX;
 pub const NO_PLAN: u32 = u32::MAX;
 /// Leg entry of a displacement without a chain.
 pub const NO_LEG: u16 = u16::MAX;
+/// Settle sample of a plan whose rollout is outside the band at its end.
+pub const NO_SETTLE: u16 = u16::MAX;
 
 /// The sections of a table file. `P` plans, `C` kept index cells, `F`
 /// fine grid points, `L` leg lattice cells, `E` explicit samples.
@@ -124,11 +126,17 @@ pub enum Section {
     CoastedPlanStates = 25,
     CoastedPlanMeta = 26,
     GeneratorVersion = 27,
+    /// Per plan: the sample from which its rollout from rest at its grid
+    /// point stays in the settle band to the plan's end, `u16 [P]`
+    /// (`NO_SETTLE`: not at the end), back to back and coasted. Where a
+    /// chain of legs is cut (`lookup::chain_plan`).
+    PlanSettle = 28,
+    CoastedPlanSettle = 29,
 }
 
 impl Section {
     /// Every section, in file order.
-    pub const ALL: [Section; 27] = [
+    pub const ALL: [Section; 29] = [
         Section::Axes,
         Section::Scalars,
         Section::PlanU,
@@ -156,6 +164,8 @@ impl Section {
         Section::CoastedPlanStates,
         Section::CoastedPlanMeta,
         Section::GeneratorVersion,
+        Section::PlanSettle,
+        Section::CoastedPlanSettle,
     ];
     pub const COUNT: usize = Section::ALL.len();
     /// The explicit tier's sections.
@@ -186,7 +196,9 @@ impl Section {
             | Section::ExplicitIndexSlot
             | Section::CoastedExplicitIndexSlot
             | Section::FineExplicitSlot
-            | Section::CoastedFineExplicitSlot => 2,
+            | Section::CoastedFineExplicitSlot
+            | Section::PlanSettle
+            | Section::CoastedPlanSettle => 2,
             Section::Index | Section::CoastedIndex => 4,
             Section::PlanMeta | Section::CoastedPlanMeta => PLAN_META_BYTES,
             Section::ExplicitSamples => 0,
@@ -224,6 +236,8 @@ impl Section {
             Section::CoastedPlanStates => "coasted_plan_states",
             Section::CoastedPlanMeta => "coasted_plan_meta",
             Section::GeneratorVersion => "generator_version",
+            Section::PlanSettle => "plan_settle_sample",
+            Section::CoastedPlanSettle => "coasted_plan_settle_sample",
         }
     }
 }

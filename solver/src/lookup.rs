@@ -288,16 +288,16 @@ pub const MAX_CHAIN_LEGS: usize = 8;
 /// samples `head` plays first (a shot in flight to the chain's first
 /// waypoint; none from rest), then the chain from displacement `d =
 /// x_start - x_target` (positions; speeds ignored), each leg's plan cut at
-/// `arrival(plan, start)` (the sample from which its rollout from rest at
-/// `start`, relative to its own target, stays in the settle band; above
-/// `K`: none), the whole compressed in time into `K` samples when longer
+/// its stored settle sample (`Section::PlanSettle`: from there its rollout
+/// from rest, on the model and the set's own schedule, stays in the settle
+/// band), the whole compressed in time into `K` samples when longer
 /// (nearest sample). Returns the chain's length in samples (the plan holds
 /// all of it, or the whole compressed). A start for one shot to the final
 /// target: rest-to-rest legs compose (the dynamics do not depend on
 /// position), so on the model the uncompressed plan ends in the band of
 /// the chain's end, within half a leg lattice step of the target; the
 /// compressed one is a guess the shot corrects. None without tables or a
-/// chain, where a leg's plan does not arrive, or where the plan would be a
+/// chain, where a leg's plan does not settle, or where the plan would be a
 /// single stored plan from rest (no head, one leg).
 pub fn chain_plan<const NX: usize, const K: usize>(
     t: &Tables,
@@ -305,18 +305,25 @@ pub fn chain_plan<const NX: usize, const K: usize>(
     head: (&[f64; K], usize),
     d: &[f64; NX],
     coasted: bool,
-    mut arrival: impl FnMut(&[f64; K], &[f64; NX]) -> usize,
     out: &mut [f64; K],
 ) -> Option<usize> {
     if !use_tables {
         return None;
     }
-    let (set, min_time) = if coasted {
-        (PlanSet::Coasted, Section::CoastedPlanMinTime)
+    let (set, min_time, settle) = if coasted {
+        (
+            PlanSet::Coasted,
+            Section::CoastedPlanMinTime,
+            Section::CoastedPlanSettle,
+        )
     } else {
-        (PlanSet::BackToBack, Section::PlanMinTime)
+        (
+            PlanSet::BackToBack,
+            Section::PlanMinTime,
+            Section::PlanSettle,
+        )
     };
-    if t.elements(min_time) == 0 {
+    if t.elements(min_time) == 0 || t.elements(settle) != t.plan_count {
         return None;
     }
     let (head, head_samples) = (head.0, head.1.min(K));
@@ -340,22 +347,14 @@ pub fn chain_plan<const NX: usize, const K: usize>(
         }
         // The plan's grid point, the last capsule fastest.
         let axis = t.plan_axis;
-        let mut start = [0.0; NX];
         let mut flat = plan;
         let mut i = NX / 2;
         while i > 0 {
             i -= 1;
-            start[2 * i] = axis.start + (flat % axis.count) as f64 * axis.step;
-            rest[2 * i] -= start[2 * i];
+            rest[2 * i] -= axis.start + (flat % axis.count) as f64 * axis.step;
             flat /= axis.count;
         }
-        let mut u = [0.0; K];
-        let mut k = 0;
-        while k < K {
-            u[k] = t.plan_u(set, plan, k);
-            k += 1;
-        }
-        let samples = arrival(&u, &start);
+        let samples = t.u16_at(settle, plan) as usize;
         if samples > K {
             return None;
         }

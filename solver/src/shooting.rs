@@ -277,7 +277,7 @@ impl<const M: usize, const NX: usize, const K: usize> Shooter<M, NX, K> {
     }
 
     /// Whether `n` more samples fit the budget; takes them if so.
-    pub(crate) fn spend(&mut self, n: usize) -> bool {
+    fn spend(&mut self, n: usize) -> bool {
         if n > self.budget_samples {
             self.budget_samples = 0;
             return false;

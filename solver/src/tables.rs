@@ -290,12 +290,14 @@ impl<'a> Tables<'a> {
         let (pc, cc, fc, ec) = (t.plan_count, t.cell_count, t.fine_count, t.explicit_count);
         // (section, expected element count, the other count allowed: a
         // module without explicit tier or coasted plans stores none)
-        let checks: [(Section, usize, usize); 23] = [
+        let checks: [(Section, usize, usize); 25] = [
             (Section::PlanU, pc * k, pc * k),
             (Section::PlanMinTime, pc, pc),
             (Section::CoastedPlanU, pc * k, 0),
             (Section::CoastedPlanReached, pc, 0),
             (Section::CoastedPlanMinTime, pc, 0),
+            (Section::PlanSettle, pc, pc),
+            (Section::CoastedPlanSettle, pc, 0),
             (Section::Index, cc, cc),
             (Section::CoastedIndex, cc, cc),
             (Section::FinePlanU, fc * k, fc * k),

@@ -233,16 +233,6 @@ impl<
         if !self.shooting {
             return false;
         }
-        let (schedule, scales) = (self.schedule, self.scales);
-        let shooter = &mut self.shooter;
-        // Each leg's plan is cut where its own rollout enters the band for
-        // good (one rollout of the plan, from the cycle's budget).
-        let arrival = |u: &[f64; K], start: &[f64; NX]| {
-            if !shooter.spend(K) {
-                return K + 1;
-            }
-            shooter.settle_sample::<S>(start, u, &schedule, &scales)
-        };
         // The chain continues from the waypoint, or from here at rest.
         let head = self.shot_samples;
         let mut d = *e_final;
@@ -259,8 +249,7 @@ impl<
             S::USE_TABLES,
             (&self.plan, head),
             &d,
-            schedule.coasted(),
-            arrival,
+            self.schedule.coasted(),
             &mut seed,
         ) else {
             return false;
