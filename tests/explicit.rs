@@ -410,7 +410,8 @@ fn certified_operation_bound_covers_the_bench_states() {
 /// game cycled through stored samples (speeds up to 0.15 m/s, 0.75 mm off
 /// at 3 s) until the shortest main-grid plans were finished with one
 /// sample: it now settles in 0.709 s (0.89 s on the dense index). C ends
-/// 1.93 mm off (1.43 mm before). Asserted: the measured values with a
+/// 2.61 mm off at 3 s (its fallbacks re-plan the legs below 20 mm/s; 1.93
+/// mm when they waited for rest). Asserted: the measured values with a
 /// small margin, no refinement ran, and the refinement still settles A.
 #[test]
 fn explicit_tier_alone_closed_loop_as_measured() {
@@ -442,7 +443,7 @@ fn explicit_tier_alone_closed_loop_as_measured() {
     assert_eq!(tiers.refined, 0, "refine none ran the refinement");
     let c = run_with(Scenario::C, RefineMode::None);
     assert!(
-        c.metrics.final_position_error_m < 2.5e-3,
+        c.metrics.final_position_error_m < 3.0e-3,
         "C ends {} m off",
         c.metrics.final_position_error_m
     );

@@ -81,6 +81,41 @@ fn a_state_no_plan_covers_falls_back() {
     assert_eq!(c.mode(), Mode::Fallback);
 }
 
+/// Outside the tables with the capsules moving apart slowly (15 mm/s each
+/// way): one gradient cannot stop both, and near rest only drag, falling
+/// as v^2, removes their relative speed (three capsules once braked for
+/// 4.4 s so). The fallback re-plans the legs from there once every speed
+/// is below `REPLAN_SPEED_M_PER_S` instead of waiting for rest; faster, it
+/// keeps braking.
+#[test]
+fn a_fallback_replans_once_slow_without_waiting_for_rest() {
+    use capsule_mpc_runtime::controller::REPLAN_SPEED_M_PER_S;
+    for (speed, replans) in [
+        (0.75 * REPLAN_SPEED_M_PER_S, true),
+        (2.0 * REPLAN_SPEED_M_PER_S, false),
+    ] {
+        let mut c = controller();
+        c.set_target(&A).unwrap();
+        // 8 cm short of the target on both capsules: beyond the warm-start
+        // index, within the chained legs.
+        let x = [A[0] - 0.08, speed, A[2] - 0.08, -speed];
+        let out = c.cycle_full_state(&x).unwrap();
+        assert_eq!(out.status, RuntimeStatus::Fallback, "{speed} m/s");
+        let out = c.cycle_full_state(&x).unwrap();
+        assert_eq!(
+            out.status != RuntimeStatus::Fallback,
+            replans,
+            "{speed} m/s: {:?}, mode {:?}",
+            out.status,
+            c.mode()
+        );
+        if replans {
+            assert_eq!(out.status, RuntimeStatus::Recovering);
+            assert_ne!(c.leg_target(), Some(&A), "a waypoint first");
+        }
+    }
+}
+
 /// The simulator's report carries the mode timeline: it starts planning,
 /// ends in the hold shortly after the strict settle, and each entry is a
 /// change of mode at a later time.

@@ -120,11 +120,11 @@ extern "C" {
  *                       to it (a glitch ended). The plan restarted. Log it.
  *   ABOVE_ITERATION_MAP a QP took more iterations than measured offline for
  *                       this state; the plan is converged. Log it.
- *   RECOVERING          after a FALLBACK at rest outside the tables, the
- *                       controller re-planned its chained legs from where the
- *                       capsules are: stored plans through waypoints toward
- *                       the target, reported until the last leg. Keep the
- *                       loop running. */
+ *   RECOVERING          after a FALLBACK outside the tables with every speed
+ *                       below 20 mm/s, the controller re-planned its chained
+ *                       legs from where the capsules are: stored plans
+ *                       through waypoints toward the target, reported until
+ *                       the last leg. Keep the loop running. */
 #define CAPSULE_MPC_STATUS_OK 0
 #define CAPSULE_MPC_STATUS_FALLBACK 1
 #define CAPSULE_MPC_STATUS_ITERATION_LIMIT 2

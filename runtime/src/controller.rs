@@ -494,15 +494,20 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     /// `Fallback`: no plan. The next cycle looks the (braked) state up
-    /// again; once at rest (and only while frames agree with the
-    /// estimate, which may be wrong), the legs are re-planned from here
-    /// and reported as `Recovering` until the last one.
+    /// again; once every speed is below `REPLAN_SPEED_M_PER_S` (and only
+    /// while frames agree with the estimate, which may be wrong), the legs
+    /// are re-planned from here and reported as `Recovering` until the
+    /// last one. Not at rest: capsules moving apart near rest lose their
+    /// relative speed only to drag, which vanishes as v^2 (seen: three
+    /// capsules braked for 4.4 s from 15 and -3 mm/s), while a stored plan
+    /// from rest absorbs a few mm/s.
     fn fallback_step(&mut self, x: &[f64; NX], out: &mut CycleOutput<K>) {
         out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
         out.status = RuntimeStatus::Fallback;
         self.law.applied_samples = 0;
         self.restart_plan();
-        if at_rest(x) && self.est.gated_rejections == 0 && self.replan_legs(x) {
+        let slow = (0..NX / 2).all(|i| libm::fabs(x[2 * i + 1]) <= REPLAN_SPEED_M_PER_S);
+        if slow && self.est.gated_rejections == 0 && self.replan_legs(x) {
             self.sup.recovering = !self.sup.on_last_leg;
         }
     }

@@ -10,8 +10,8 @@ pub enum RuntimeStatus {
     Ok = 0,
     /// The state is outside the tables: one braking sample (see
     /// [`braking_gradient`](super::braking_gradient)), never an extrapolated table value. The next
-    /// cycle looks the state up again; at rest outside the tables it starts
-    /// a recovery leg (`Recovering`).
+    /// cycle looks the state up again; outside the tables with every speed
+    /// below `REPLAN_SPEED_M_PER_S` it starts a recovery leg (`Recovering`).
     Fallback = 1,
     /// A QP hit its iteration bound; the best feasible plan was used.
     IterationLimit = 2,
