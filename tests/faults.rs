@@ -491,6 +491,7 @@ fn solve_above_the_offline_iteration_map_is_flagged() {
     let mut s = Solver::new();
     s.set_shooting(true);
     s.set_shot_speed_tolerance(SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S);
+    s.set_tail_shots(true);
     s.solve(&e);
     assert_eq!(&out.gradients_t_per_m, s.plan());
 }

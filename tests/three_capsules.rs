@@ -194,7 +194,9 @@ fn a_config_with_no_compiled_controller_says_how_to_generate_one() {
 /// settle / bound median 0.95, worst 1.44 at (0, 0, 1) cm; without them 18
 /// targets did not settle strictly, median 2.05 s, worst ratio 18.8.
 /// Asserted (issue 26's floors): every target settles strictly, median <=
-/// 1.3 s, settle / bound median <= 1.05 (asked: 1.3), no target above 1.8.
+/// 1.3 s, settle / bound median <= 1.05 (asked: 1.3), no target above 1.4
+/// (asked: 1.8; measured 1.25, 1.44 without the shots from the stored
+/// tail).
 #[test]
 fn every_target_of_the_1_cm_grid_settles() {
     let (points, s) = ideal_reach(0.01);
@@ -223,12 +225,12 @@ fn every_target_of_the_1_cm_grid_settles() {
     assert!(s.median_settle_over_bound.unwrap() <= 1.05);
     let slow: Vec<_> = points
         .iter()
-        .filter(|p| p.settle_over_bound.is_some_and(|r| r > 1.8))
+        .filter(|p| p.settle_over_bound.is_some_and(|r| r > 1.4))
         .map(|p| cm(&p.target_m))
         .collect();
     assert!(
         slow.is_empty(),
-        "{} above 1.8 x the bound: {slow:?}",
+        "{} above 1.4 x the bound: {slow:?}",
         slow.len()
     );
 }
@@ -236,10 +238,10 @@ fn every_target_of_the_1_cm_grid_settles() {
 /// Off the plan grid: a 1.5 cm grid (124 targets, most between plan grid
 /// points, reached through chained legs and the fine end game): every one
 /// accepted and arrives (held settle) within the 8 s run. Measured strict
-/// settle with the shots: every target, median 1.31 s, worst 3.56 s
+/// settle with the shots: every target, median 1.27 s, worst 3.56 s
 /// (without the shot through the waypoints: median 1.59 s, worst 3.94 s;
 /// without shots: median 2.47 s, two targets unsettled). Asserted: every
-/// one settles strictly, strict median <= 1.45 s.
+/// one settles strictly, strict median <= 1.4 s.
 #[test]
 fn off_grid_targets_settle() {
     let (points, s) = ideal_reach(0.015);
@@ -261,19 +263,20 @@ fn off_grid_targets_settle() {
         "{} targets not settled strictly: {strict:?}",
         strict.len()
     );
-    assert!(s.median_settle_time_s.unwrap() <= 1.45);
+    assert!(s.median_settle_time_s.unwrap() <= 1.4);
 }
 
 /// Constant and variable sampling with 0.2 mm noise and the paper's
-/// disturbance, seeds 1-4, over targets spread through the workspace
+/// disturbance, seeds 1-8, over targets spread through the workspace
 /// (corners, faces, the issue's (1, 1, 1) cm, mixed directions), strict
 /// settle (in the band from then to the end of the 8 s run). Issue 26 asks
-/// for every run within 2x of its schedule's minimum time (the coasted
-/// bound under constant sampling where the tables have it, else the ideal
-/// one). Measured, of 40 runs each: constant sampling every run within 2x,
-/// median 1.36 s, worst 5.16 s; variable every run, 1.36 s, 5.36 s
-/// (without the shot through the waypoints 36 and 39 within 2x, medians
-/// 1.56 and 1.60 s). Asserted: every run settles within 2x.
+/// for every run of at least 40 within 2x of its schedule's minimum time
+/// (the coasted bound under constant sampling where the tables have it,
+/// else the ideal one). Measured, of 80 runs each: constant sampling every
+/// run within 2x (the tightest 1.89x), median 1.36 s, worst 5.16 s;
+/// variable every run, 1.30 s, 5.54 s (without the shots from the stored
+/// tail 80 and 79; without the shot through the waypoints 73 and 76).
+/// Asserted: every run settles within 2x.
 #[test]
 fn scanner_sampling_settles_with_noise_and_disturbance() {
     let targets_cm: [[f64; 3]; 10] = [
@@ -294,7 +297,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
         let mut never = Vec::new();
         let mut within_2x = 0;
         for t in targets_cm {
-            for seed in 1..=4 {
+            for seed in 1..=8 {
                 let m = run_to(t, sampling, Some(seed));
                 let label = format!("{t:?} cm seed {seed}");
                 let bound_s = m
@@ -315,7 +318,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
         settled.sort_by(|a, b| a.0.total_cmp(&b.0));
         let median = settled[settled.len() / 2].0;
         println!(
-            "M = 3, {} sampling: {} of 40 settle (strict), {within_2x} within 2x of the schedule's bound, median {median:.2} s, worst {:?}; never (held settle): {never:?}",
+            "M = 3, {} sampling: {} of 80 settle (strict), {within_2x} within 2x of the schedule's bound, median {median:.2} s, worst {:?}; never (held settle): {never:?}",
             sampling.name(),
             settled.len(),
             settled.last()
@@ -324,8 +327,8 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
     }
     for (sampling, settled, within_2x) in summaries {
         assert!(
-            settled == 40 && within_2x == 40,
-            "{}: {settled} of 40 settled, {within_2x} within 2x",
+            settled == 80 && within_2x == 80,
+            "{}: {settled} of 80 settled, {within_2x} within 2x",
             sampling.name()
         );
     }
@@ -343,6 +346,24 @@ fn a_shot_that_cannot_take_longer_phases_keeps_its_own() {
     let settle_s = m.settle_time_s.expect("settles");
     assert!(
         settle_s <= 1.5 * bound_s,
+        "settled at {settle_s} s against a {bound_s} s bound"
+    );
+}
+
+/// From rest under variable sampling the first solve models the switching
+/// rule's long phases with a coast after each, and for a separation of
+/// about 1 s the refined stored plan does not settle within the horizon:
+/// the short shot from it never converged, and (2, 0, -1) cm, seed 8,
+/// found none until 2.2 s (2.61 s, 2.3x its 1.12 s bound). The shot from
+/// the stored plan tail, as long as the tail takes to settle, converges at
+/// the first cycle: 1.20 s.
+#[test]
+fn a_separation_from_rest_shoots_from_the_stored_plan() {
+    let m = run_to([2.0, 0.0, -1.0], Sampling::Variable, Some(8));
+    let bound_s = m.min_time_bound_s.unwrap();
+    let settle_s = m.settle_time_s.expect("settles");
+    assert!(
+        settle_s <= 1.25 * bound_s,
         "settled at {settle_s} s against a {bound_s} s bound"
     );
 }

@@ -108,6 +108,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
             Sampling::Constant | Sampling::Variable => SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S,
         });
+        c.solver.set_tail_shots(
+            settings.sampling == Sampling::Ideal || NX / 2 >= SHOTS_CARRY_FROM_CAPSULES,
+        );
         c.reset(positions_m)?;
         Ok(c)
     }
@@ -494,13 +497,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     /// `Fallback`: no plan. The next cycle looks the (braked) state up
-    /// again; once every speed is below `REPLAN_SPEED_M_PER_S` (and only
-    /// while frames agree with the estimate, which may be wrong), the legs
-    /// are re-planned from here and reported as `Recovering` until the
-    /// last one. Not at rest: capsules moving apart near rest lose their
-    /// relative speed only to drag, which vanishes as v^2 (seen: three
-    /// capsules braked for 4.4 s from 15 and -3 mm/s), while a stored plan
-    /// from rest absorbs a few mm/s.
+    /// again; once every speed is below `REPLAN_SPEED_M_PER_S` (not at
+    /// rest: near rest only drag, vanishing as v^2, slows capsules moving
+    /// apart) and while frames agree with the estimate, the legs are
+    /// re-planned from here and reported as `Recovering` until the last.
     fn fallback_step(&mut self, x: &[f64; NX], out: &mut CycleOutput<K>) {
         out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
         out.status = RuntimeStatus::Fallback;

@@ -4,7 +4,7 @@
 //! (`refine`) and the explicit tier (`explicit`). Relative states are
 //! `e = x - x_target` in SI, `NX = 2 M` entries [x1, v1, x2, v2, ...].
 
-use crate::format::{Axis, Section};
+use crate::format::{Axis, Section, NO_SETTLE};
 use crate::report::Leg;
 use crate::tables::{PlanSet, Tables};
 
@@ -425,6 +425,26 @@ pub fn covers_from_rest<const NX: usize>(t: &Tables, use_tables: bool, e: &[f64;
     nearest_cell(&t.plan_axis, e, None).is_some_and(|flat| t.u8_at(Section::PlanReached, flat) != 0)
 }
 
+/// The stored plan tail for relative state `e`: (plan, offset) of the
+/// index cell's entry, back to back or coasted; None outside the index or
+/// where its cell has no plan.
+fn index_entry<const NX: usize>(
+    t: &Tables,
+    e: &[f64; NX],
+    coasted: bool,
+) -> Option<(usize, usize)> {
+    let flat = index_cell(t, e)?;
+    let section = if coasted {
+        Section::CoastedIndex
+    } else {
+        Section::Index
+    };
+    let cell = t.u32_at(section, flat);
+    let plan = (cell >> 16) as usize;
+    let offset = (cell & 0xffff) as usize;
+    (plan < t.plan_count).then_some((plan, offset))
+}
+
 /// Fills `out` with the stored plan tail for relative state `e` from the
 /// back-to-back tables; None when `e` is outside the index or its cell has
 /// no plan.
@@ -433,28 +453,26 @@ pub fn lookup_tail<const NX: usize, const K: usize>(
     e: &[f64; NX],
     out: &mut [f64; K],
 ) -> Option<()> {
-    lookup_tail_for(t, e, out, false)
+    lookup_tail_for(t, e, out, false).map(|_| ())
 }
 
 /// As `lookup_tail`, from the tables solved for one sample per actuation
-/// phase followed by the coast (constant sampling) when `coasted`.
+/// phase followed by the coast (constant sampling) when `coasted`. Returns
+/// the samples after which the tail settles (its plan's stored settle
+/// sample less the tail's offset; above `K` where the plan does not
+/// settle).
 pub fn lookup_tail_for<const NX: usize, const K: usize>(
     t: &Tables,
     e: &[f64; NX],
     out: &mut [f64; K],
     coasted: bool,
-) -> Option<()> {
-    let flat = index_cell(t, e)?;
-    let (cell, set) = if coasted {
-        (t.u32_at(Section::CoastedIndex, flat), PlanSet::Coasted)
+) -> Option<usize> {
+    let (plan, offset) = index_entry(t, e, coasted)?;
+    let (set, settle) = if coasted {
+        (PlanSet::Coasted, Section::CoastedPlanSettle)
     } else {
-        (t.u32_at(Section::Index, flat), PlanSet::BackToBack)
+        (PlanSet::BackToBack, Section::PlanSettle)
     };
-    let plan = (cell >> 16) as usize;
-    let offset = (cell & 0xffff) as usize;
-    if plan >= t.plan_count {
-        return None;
-    }
     let mut i = 0;
     while i < K {
         out[i] = if offset + i < K {
@@ -464,5 +482,14 @@ pub fn lookup_tail_for<const NX: usize, const K: usize>(
         };
         i += 1;
     }
-    Some(())
+    let settles_at = if t.elements(settle) == t.plan_count {
+        t.u16_at(settle, plan)
+    } else {
+        NO_SETTLE
+    };
+    Some(if settles_at == NO_SETTLE {
+        K + 1
+    } else {
+        (settles_at as usize).saturating_sub(offset)
+    })
 }

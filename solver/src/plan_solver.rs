@@ -97,6 +97,9 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// A converged shot's terminal speed tolerance, m/s (see
     /// `shooting::SHOT_SPEED_TOLERANCE_FULL_STATE_M_PER_S`).
     fn set_shot_speed_tolerance(&mut self, tolerance_m_per_s: f64);
+    /// Whether a refined plan that does not settle within the horizon
+    /// looks first for a shot from the stored plan tail (`Solver::set_tail_shots`).
+    fn set_tail_shots(&mut self, on: bool);
     /// Whether a start at rest at relative positions `e` is covered.
     fn covers_from_rest(e: &[f64; NX]) -> bool;
     /// The first leg from rest at displacement `d = x_start - x_target`
@@ -210,6 +213,9 @@ impl<
     }
     fn set_shot_speed_tolerance(&mut self, tolerance_m_per_s: f64) {
         Solver::set_shot_speed_tolerance(self, tolerance_m_per_s)
+    }
+    fn set_tail_shots(&mut self, on: bool) {
+        Solver::set_tail_shots(self, on)
     }
     fn adopt_explicit(&mut self) {
         Solver::adopt_explicit(self)

@@ -75,6 +75,10 @@ pub struct Solver<S, const M: usize, const NX: usize, const N: usize, const K: u
     shot_samples: usize,
     /// Whether `solve` shoots.
     shooting: bool,
+    /// Whether a refined plan that does not settle within the horizon
+    /// looks first for a shot from the stored plan tail, as long as the
+    /// tail takes to settle (see `acquire_shot`).
+    tail_shots: bool,
     spec: PhantomData<S>,
 }
 
@@ -135,6 +139,7 @@ impl<
             shooter: Shooter::new(),
             shot_samples: 0,
             shooting: false,
+            tail_shots: false,
             spec: PhantomData,
         }
     }
@@ -268,6 +273,14 @@ impl<
         self.shooter.set_speed_tolerance(tolerance_m_per_s);
     }
 
+    /// Whether a refined plan that does not settle within the horizon
+    /// looks first for a shot seeded from the stored plan tail, as long as
+    /// the tail's stored settle sample (else only the short shot of
+    /// `SHOT_UNSETTLED_SAMPLES` from the refined plan).
+    pub fn set_tail_shots(&mut self, on: bool) {
+        self.tail_shots = on;
+    }
+
     /// Whether `solve` looks for minimum-time shots; off drops the shot.
     pub fn set_shooting(&mut self, on: bool) {
         self.shooting = on;
@@ -366,7 +379,7 @@ impl<
             let found = if fine {
                 Some(())
             } else {
-                lookup_tail_for(tables, e, &mut self.candidate, coasted)
+                lookup_tail_for(tables, e, &mut self.candidate, coasted).map(|_| ())
             };
             match found {
                 Some(()) => {

@@ -189,10 +189,12 @@ pub const SHOT_SCANNER_BEYOND_M: f64 = 3e-3;
 /// was found again). So under variable sampling a shot that cannot be
 /// re-solved for longer actuation phases keeps flying on the phases it
 /// was solved for, a tracked shot aims at
-/// `SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S`, and a chained move flies
-/// one shot through its waypoints (`Controller::shoot_through_legs`; with
-/// fewer capsules only under ideal sampling). With two capsules all three
-/// measured slower or mixed (docs/decisions.md).
+/// `SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S`, a chained move flies
+/// one shot through its waypoints (`Controller::shoot_through_legs`), and
+/// a refined plan that does not settle within the horizon looks for a
+/// shot from the stored plan tail (`Solver::set_tail_shots`; the last two
+/// with fewer capsules only under ideal sampling). With two capsules all
+/// four measured slower or mixed (docs/decisions.md).
 pub const SHOTS_CARRY_FROM_CAPSULES: usize = 3;
 
 /// Default hold entry: 0.7 of the 1 mm settle tolerance, m.

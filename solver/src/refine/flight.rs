@@ -184,6 +184,9 @@ impl<
         if settle == 0 {
             return;
         }
+        if settle > K && self.tail_shots && self.shoot_from_tail(e, report) {
+            return;
+        }
         // A plan that does not settle within the horizon: a shot of
         // `SHOT_UNSETTLED_SAMPLES` (the search shortens it from there).
         // Not longer: long shots played open loop between frames miss
@@ -219,6 +222,54 @@ impl<
                 f64::INFINITY,
             );
         }
+    }
+
+    /// A shot from the stored plan tail for `e` (the minimum-time plan the
+    /// index names), as long as the tail takes to settle on its own
+    /// schedule and at least `SHOT_UNSETTLED_SAMPLES`, then shortened. For
+    /// a refined plan that does not settle within the horizon: from rest,
+    /// three capsules' separations (minimum times near 1 s) under variable
+    /// sampling's phases and coasts gave refined plans that never settled,
+    /// and the 30-sample shot from them never converged (no shot until
+    /// 2.2 s on (2, 0, -1) cm). True when one converges: the plan is that
+    /// shot.
+    fn shoot_from_tail(&mut self, e: &[f64; NX], report: &mut SolveReport) -> bool {
+        if !S::USE_TABLES {
+            return false;
+        }
+        let coasted = self.schedule.coasted();
+        let Some(settles_in) = lookup_tail_for(&S::TABLES, e, &mut self.candidate, coasted) else {
+            return false;
+        };
+        if settles_in == 0 || settles_in > K {
+            return false;
+        }
+        let n = settles_in.max(SHOT_UNSETTLED_SAMPLES.min(K));
+        if !self.shooter.shoot::<S>(
+            e,
+            &mut self.candidate,
+            n,
+            SHOT_ITERATIONS,
+            &self.schedule,
+            &self.scales,
+        ) {
+            return false;
+        }
+        let mut p = self.candidate;
+        let best = self.shorten_shot(e, &mut p, n, 0, SHOT_MAX_LENGTHS);
+        if best == 0 {
+            return false;
+        }
+        self.plan = p;
+        self.shot_samples = best;
+        report.cost = rollout_cost_below_scaled::<S, M, NX, K>(
+            e,
+            &self.plan,
+            &self.schedule,
+            &self.scales,
+            f64::INFINITY,
+        );
+        true
     }
 
     /// On a leg to a waypoint of a chain (`e_leg` relative to the
