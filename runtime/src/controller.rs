@@ -20,6 +20,7 @@ mod legs;
 mod mode;
 mod numeric;
 mod settings;
+mod shots;
 mod state;
 mod station;
 mod status;
@@ -108,9 +109,6 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
             Sampling::Constant | Sampling::Variable => SHOT_SPEED_TOLERANCE_TRACKED_M_PER_S,
         });
-        c.solver.set_tail_shots(
-            settings.sampling == Sampling::Ideal || NX / 2 >= SHOTS_CARRY_FROM_CAPSULES,
-        );
         c.reset(positions_m)?;
         Ok(c)
     }
@@ -462,6 +460,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.solver.shift(self.law.applied_samples);
         self.solver.start_cycle();
         self.solver.set_shooting(self.shooting_wanted(e));
+        self.solver.set_tail_shots(self.tail_shots_wanted());
         if self.solver.shot_samples() == 0 && self.creeping(e) {
             // Nearly at rest and still away from the target: the stored
             // minimum-time plan from here is the best start; a refined plan
@@ -473,27 +472,6 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             *e = self.relative(x, &self.sup.target);
         }
         report
-    }
-
-    /// Whether the solver should look for minimum-time shots from `e` (see
-    /// `capsule_mpc_solver::shooting`). Under ideal sampling everywhere.
-    /// Under the scanner cycle only while some capsule is farther than
-    /// `SHOT_SCANNER_BEYOND_M` from its target: nearer, a shot's
-    /// separation manoeuvre (up to 0.1 m/s for a millimetre of relative
-    /// error) played through tracking gaps on an estimate arrives with a
-    /// relative speed the hold cannot remove (measured, docs/decisions.md).
-    fn shooting_wanted(&self, e: &[f64; NX]) -> bool {
-        self.shots_on()
-            && (self.settings.sampling == Sampling::Ideal
-                || self.solver.shot_samples() > 0
-                || (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > SHOT_SCANNER_BEYOND_M))
-    }
-
-    /// Whether these settings shoot at all (`Shooting::is_on`; the
-    /// explicit tier alone never does).
-    fn shots_on(&self) -> bool {
-        let s = &self.settings;
-        s.shooting.is_on() && s.refine != Refine::None
     }
 
     /// `Fallback`: no plan. The next cycle looks the (braked) state up
@@ -744,9 +722,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // factors the loop was given, the factors' remaining uncertainty
         // grows the error too.
         let cautious = (0..NX / 2).all(|i| libm::fabs(e[2 * i]) < ARRIVAL_REGION_M)
-            && (0..NX / 2).any(|i| {
-                self.est.scales[i].differs_from(self.est.told_factors[i], SCALE_SIGNIFICANCE)
-            });
+            && self.factors_differ_from_told();
         let mut state = *e;
         for (k, &u) in plan.iter().enumerate() {
             costs[k] = S::stage_cost(&state, u);

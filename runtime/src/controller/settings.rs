@@ -192,8 +192,8 @@ pub const SHOT_SCANNER_BEYOND_M: f64 = 3e-3;
 /// `SHOT_SPEED_TOLERANCE_TRACKED_MANY_M_PER_S`, a chained move flies
 /// one shot through its waypoints (`Controller::shoot_through_legs`), and
 /// a refined plan that does not settle within the horizon looks for a
-/// shot from the stored plan tail (`Solver::set_tail_shots`; the last two
-/// with fewer capsules only under ideal sampling). With two capsules all
+/// shot from the stored plan tail (`Controller::tail_shots_wanted`; the
+/// last two with fewer capsules only under ideal sampling). With two capsules all
 /// four measured slower or mixed (docs/decisions.md).
 pub const SHOTS_CARRY_FROM_CAPSULES: usize = 3;
 
