@@ -193,8 +193,8 @@ pub const SHOT_SCANNER_BEYOND_M: f64 = 3e-3;
 /// one shot through its waypoints (`Controller::shoot_through_legs`), and
 /// a refined plan that does not settle within the horizon looks for a
 /// shot from the stored plan tail (`Controller::tail_shots_wanted`; the
-/// last two with fewer capsules only under ideal sampling). With two capsules all
-/// four measured slower or mixed (docs/decisions.md).
+/// last two with fewer capsules only under ideal sampling). With two
+/// capsules all four measured slower or mixed (docs/decisions.md).
 pub const SHOTS_CARRY_FROM_CAPSULES: usize = 3;
 
 /// Default hold entry: 0.7 of the 1 mm settle tolerance, m.
