@@ -13,15 +13,30 @@ TARGETS = [(a, b) for a in STEPS_M for b in STEPS_M if (a, b) != (0.0, 0.0)]
 
 def simulate(binary, sampling, extra, target, seed):
     """The JSON report of one 6 s run to `target` (two positions, m)."""
+    return simulate_args(
+        binary,
+        ["--target", f"{target[0]},0,{target[1]},0", "--sampling", sampling,
+         "--disturbance", "paper", "--seed", str(seed), "--duration", "6"] + extra)
+
+
+def simulate_args(binary, args):
+    """The JSON report of one `capsule-mpc simulate` run with `args`."""
     fd, path = tempfile.mkstemp(suffix=".json")
     os.close(fd)
     try:
-        subprocess.run(
-            [binary, "simulate", "--target", f"{target[0]},0,{target[1]},0",
-             "--sampling", sampling, "--disturbance", "paper", "--seed", str(seed),
-             "--duration", "6", "--json", path] + extra,
-            check=True, capture_output=True)
+        subprocess.run([binary, "simulate"] + args + ["--json", path],
+                       check=True, capture_output=True)
         with open(path) as f:
             return json.load(f)
     finally:
         os.remove(path)
+
+
+def pop_option(args, name):
+    """The value of `name VALUE` in `args` (removed from it), or None."""
+    if name not in args:
+        return None
+    k = args.index(name)
+    value = args[k + 1]
+    del args[k:k + 2]
+    return value

@@ -17,7 +17,7 @@ import statistics
 import sys
 from concurrent.futures import ThreadPoolExecutor
 
-from grid_runs import NEVER_S, TARGETS, simulate
+from grid_runs import NEVER_S, TARGETS, pop_option, simulate
 
 PLANTS = [
     ("model", []),
@@ -44,11 +44,7 @@ def told(extra, std):
 
 def main():
     args = sys.argv[1:]
-    told_std = None
-    if "--told" in args:
-        k = args.index("--told")
-        told_std = args[k + 1]
-        del args[k:k + 2]
+    told_std = pop_option(args, "--told")
     binary = args[0]
     seeds = range(1, int(args[1]) + 1) if len(args) > 1 else range(1, 9)
     for sampling in ("constant", "variable"):

@@ -11,13 +11,11 @@ slowest runs. The draw is seeded, so a run list is reproducible.
     cargo build --release
     python3 docs/scripts/random_plants.py target/release/capsule-mpc [RUNS] [DRAW_SEED] [--config FILE]
 """
-import json
-import os
 import random
-import subprocess
 import sys
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
+
+from grid_runs import pop_option, simulate_args
 
 NEVER_S = 99.0
 
@@ -38,40 +36,29 @@ def draw(runs, seed, capsules):
     return out
 
 
-def simulate(binary, config, run):
-    fd, path = tempfile.mkstemp(suffix=".json")
-    os.close(fd)
-    try:
-        args = [binary, "simulate",
-                "--target", ",".join(f"{x},0" for x in run["target_m"]),
-                "--sampling", run["sampling"], "--disturbance", "paper",
-                "--disturbance-model", run["disturbance"], "--seed", str(run["seed"]),
-                "--duration", "8", "--json", path,
-                "--plant-drag-scale", ",".join(map(str, run["drag"])),
-                "--plant-gain-scale", ",".join(map(str, run["gain"]))]
-        if config:
-            args += ["--config", config]
-        subprocess.run(args, check=True, capture_output=True)
-        with open(path) as f:
-            return json.load(f)["metrics"]["settle_time_s"]
-    finally:
-        os.remove(path)
+def settle_s(binary, config, run):
+    """Strict settle time of one 8 s run (None: never)."""
+    args = ["--target", ",".join(f"{x},0" for x in run["target_m"]),
+            "--sampling", run["sampling"], "--disturbance", "paper",
+            "--disturbance-model", run["disturbance"], "--seed", str(run["seed"]),
+            "--duration", "8",
+            "--plant-drag-scale", ",".join(map(str, run["drag"])),
+            "--plant-gain-scale", ",".join(map(str, run["gain"]))]
+    if config:
+        args += ["--config", config]
+    return simulate_args(binary, args)["metrics"]["settle_time_s"]
 
 
 def main():
     args = sys.argv[1:]
-    config = None
-    if "--config" in args:
-        k = args.index("--config")
-        config = args[k + 1]
-        del args[k:k + 2]
+    config = pop_option(args, "--config")
     binary = args[0]
     runs = int(args[1]) if len(args) > 1 else 400
     seed = int(args[2]) if len(args) > 2 else 1
     capsules = 3 if config and "three" in config else 2
     plan = draw(runs, seed, capsules)
     with ThreadPoolExecutor(2) as ex:
-        settle = list(ex.map(lambda r: simulate(binary, config, r), plan))
+        settle = list(ex.map(lambda r: settle_s(binary, config, r), plan))
     times = sorted(NEVER_S if s is None else s for s in settle)
     unsettled = sum(1 for s in settle if s is None)
     print(f"{runs} runs ({capsules} capsules, draw {seed}): {unsettled} unsettled; "

@@ -199,29 +199,7 @@ impl<
         // Lock the arrival at `settle`, then bisect for the shortest length
         // that converges from the plan compressed in time.
         self.candidate = self.plan;
-        if !self.shooter.shoot::<S>(
-            e,
-            &mut self.candidate,
-            settle,
-            SHOT_ITERATIONS,
-            &self.schedule,
-            &self.scales,
-        ) {
-            return;
-        }
-        let mut p = self.candidate;
-        let best = self.shorten_shot(e, &mut p, settle, 0, SHOT_MAX_LENGTHS);
-        if best > 0 {
-            self.plan = p;
-            self.shot_samples = best;
-            report.cost = rollout_cost_below_scaled::<S, M, NX, K>(
-                e,
-                &self.plan,
-                &self.schedule,
-                &self.scales,
-                f64::INFINITY,
-            );
-        }
+        self.adopt_shot_from_candidate(e, settle, report);
     }
 
     /// A shot from the stored plan tail for `e` (the minimum-time plan the
@@ -245,6 +223,19 @@ impl<
             return false;
         }
         let n = settles_in.max(SHOT_UNSETTLED_SAMPLES.min(K));
+        self.adopt_shot_from_candidate(e, n, report)
+    }
+
+    /// Shoots `n` samples from `e` seeded with `candidate`, then bisects for
+    /// the shortest length that converges; on success the plan is that
+    /// shot, `report` carries its cost, and the call returns true. False
+    /// leaves the plan as it was.
+    fn adopt_shot_from_candidate(
+        &mut self,
+        e: &[f64; NX],
+        n: usize,
+        report: &mut SolveReport,
+    ) -> bool {
         if !self.shooter.shoot::<S>(
             e,
             &mut self.candidate,
