@@ -338,6 +338,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.sup.final_target = *target;
         self.sup.has_target = true;
         self.sup.recovering = false;
+        self.sup.off_model_confirm_exits = 0;
         self.apply_leg(&x, &leg);
         self.restart_factor_window();
         self.restart_plan();
@@ -459,7 +460,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     fn solve_step(&mut self, x: &[f64; NX], e: &mut [f64; NX]) -> SolveReport {
         self.solver.shift(self.law.applied_samples);
         self.solver.start_cycle();
-        self.solver.set_shooting(self.shooting_wanted(e));
+        self.solver.set_shooting(self.shots_on());
         self.solver.set_tail_shots(self.tail_shots_wanted());
         if self.solver.shot_samples() == 0 && self.creeping(e) {
             // Nearly at rest and still away from the target: the stored

@@ -80,7 +80,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && centre_m <= HOLD_CENTRE_RELEASE_M
                 // The frames after entry tell the relative speed better
                 // than the one the entry was decided on.
-                && (!settling || can_stop(HOLD_CONFIRM_SPREAD_M, 0.0))
+                && (!settling || can_stop(self.hold_confirm_spread_m(), 0.0))
         } else {
             slow(s.hold_enter_speed_m_per_s)
                 && half_spread_m(e, 0.0) <= s.hold_release_position_m
@@ -94,6 +94,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.forget_stall();
         }
         if was && !holding {
+            if settling && self.hold_confirm_spread_m() < HOLD_CONFIRM_SPREAD_M {
+                self.sup.off_model_confirm_exits += 1;
+            }
             // Re-plan from the tables, not from the plan before the hold.
             self.solver.reset();
             self.law.planned_phase_samples = self.settings.max_actuation_samples;
@@ -132,6 +135,23 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             / S::DT_S;
         let bound = HOLD_MAX_GRADIENT_FRACTION * S::U_MAX_T_PER_M;
         ((centre_accel + dither_accel) / mean_g).clamp(-bound, bound)
+    }
+
+    /// How far apart the capsules may stop for a settling hold to go on,
+    /// m: `HOLD_CONFIRM_SPREAD_M`, except under the scanner cycle off the
+    /// model `HOLD_CONFIRM_SPREAD_OFF_MODEL_M` for the first
+    /// `HOLD_CONFIRM_OFF_MODEL_EXITS` holds left so per target (factors
+    /// learned from frames that were wrong would otherwise leave every
+    /// hold).
+    fn hold_confirm_spread_m(&self) -> f64 {
+        if self.settings.sampling != Sampling::Ideal
+            && self.sup.off_model_confirm_exits < HOLD_CONFIRM_OFF_MODEL_EXITS
+            && self.factors_differ_from_told()
+        {
+            HOLD_CONFIRM_SPREAD_OFF_MODEL_M
+        } else {
+            HOLD_CONFIRM_SPREAD_M
+        }
     }
 
     /// The zero-gradient gap after each hold sample, s.

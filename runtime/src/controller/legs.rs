@@ -58,7 +58,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     pub(super) fn shoot_through_legs(&mut self, x: &[f64; NX], e: &[f64; NX]) -> bool {
         let scanner = self.settings.sampling != Sampling::Ideal;
         if self.sup.on_last_leg
-            || !self.shooting_wanted(e)
+            || !self.shots_on()
             || (scanner && NX / 2 < SHOTS_CARRY_FROM_CAPSULES)
         {
             return false;

@@ -43,8 +43,7 @@ pub enum Refine {
 /// When the solver looks for minimum-time shots
 /// (`capsule_mpc_solver::shooting`): the plan is the shortest one that
 /// ends at the target at rest, re-solved every cycle, wherever one
-/// converges (under the scanner cycle only beyond `SHOT_SCANNER_BEYOND_M`).
-/// Without them, the refinement of the stored plans alone.
+/// converges. Without them, the refinement of the stored plans alone.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Shooting {
     Off,
@@ -178,10 +177,6 @@ impl ControllerSettings {
 /// remove (docs/decisions.md).
 pub const ARRIVAL_REGION_M: f64 = 20e-3;
 
-/// Under the scanner cycle, shots are looked for only while some capsule is
-/// farther than this from its target, m (see `Controller::shooting_wanted`).
-pub const SHOT_SCANNER_BEYOND_M: f64 = 3e-3;
-
 /// From this many capsules the minimum-time shots carry the moves under
 /// the scanner cycle: the refinement of their stored plans (1 cm apart,
 /// from rest, no explicit tier) is a poor fallback from a moving state
@@ -233,6 +228,16 @@ pub const HOLD_STOP_SPREAD_M: f64 = 2.0e-3;
 /// dither then only watches it drift for seconds. 2 mm (the entry's) and
 /// 3 mm also left holds that would have settled (docs/decisions.md).
 pub const HOLD_CONFIRM_SPREAD_M: f64 = 4.0e-3;
+/// ... and this spread once the learned factors differ from the told ones,
+/// m: off the model the arrivals keep relative speeds the dither stops
+/// only near the band's edge, where the capsules then sit for seconds
+/// before leaving it, while a shot from the hold's first half second
+/// lands on the learned factors. On the model 2 mm leaves holds that would
+/// have settled (the reach grid's runs above 2x: docs/decisions.md).
+pub const HOLD_CONFIRM_SPREAD_OFF_MODEL_M: f64 = 2.0e-3;
+/// ... for this many holds per target: factors learned from wrong frames
+/// (a 2 mm tracking glitch taken for true) otherwise leave hold after hold.
+pub const HOLD_CONFIRM_OFF_MODEL_EXITS: u32 = 2;
 /// The hold's entry test gives the estimated relative rate this many of
 /// its standard deviations (see `Controller::update_hold`).
 pub const HOLD_ENTRY_RATE_SIGMAS: f64 = 1.0;

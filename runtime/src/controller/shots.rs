@@ -5,22 +5,13 @@ use super::Controller;
 use capsule_mpc_solver::*;
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
-    /// Whether the solver should look for minimum-time shots from `e` (see
-    /// `capsule_mpc_solver::shooting`). Under ideal sampling everywhere.
-    /// Under the scanner cycle only while some capsule is farther than
-    /// `SHOT_SCANNER_BEYOND_M` from its target: nearer, a shot's
-    /// separation manoeuvre (up to 0.1 m/s for a millimetre of relative
-    /// error) played through tracking gaps on an estimate arrives with a
-    /// relative speed the hold cannot remove (measured, docs/decisions.md).
-    pub(super) fn shooting_wanted(&self, e: &[f64; NX]) -> bool {
-        self.shots_on()
-            && (self.settings.sampling == Sampling::Ideal
-                || self.solver.shot_samples() > 0
-                || (0..NX / 2).any(|i| libm::fabs(e[2 * i]) > SHOT_SCANNER_BEYOND_M))
-    }
-
-    /// Whether these settings shoot at all (`Shooting::is_on`; the
-    /// explicit tier alone never does).
+    /// Whether the solver looks for minimum-time shots (see
+    /// `capsule_mpc_solver::shooting`): wherever one converges, up to the
+    /// target, once these settings shoot at all (`Shooting::is_on`; the
+    /// explicit tier alone never does). Under the scanner cycle, shots
+    /// within 3 mm of the target once arrived with relative speeds the hold
+    /// could not stop; on the learned factors they are the fastest way back
+    /// from a hold that cannot hold (docs/decisions.md).
     pub(super) fn shots_on(&self) -> bool {
         let s = &self.settings;
         s.shooting.is_on() && s.refine != Refine::None

@@ -143,6 +143,9 @@ pub(super) struct Supervision<const NX: usize> {
     /// since, s.
     pub stall_best_m: f64,
     pub stall_clock_s: f64,
+    /// Settling holds left at the off-model confirm spread since the
+    /// target was set (see `Controller::hold_confirm_spread_m`).
+    pub off_model_confirm_exits: u32,
 }
 
 impl<const NX: usize> Supervision<NX> {
@@ -156,6 +159,7 @@ impl<const NX: usize> Supervision<NX> {
             mode: Mode::NoTarget,
             stall_best_m: f64::INFINITY,
             stall_clock_s: 0.0,
+            off_model_confirm_exits: 0,
         }
     }
 
