@@ -325,9 +325,8 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub no_hold: bool,
     /// Minimum-time shots: the plan is the shortest one that ends at the
-    /// target at rest, re-solved every cycle (scanner cycle: while a
-    /// capsule is beyond 3 mm of its target, and to the end of a shot in
-    /// flight). Default: on.
+    /// target at rest, re-solved every cycle, wherever one converges.
+    /// Default: on.
     #[arg(long, conflicts_with = "no_shooting")]
     pub shooting: bool,
     /// No minimum-time shots (the refinement of the stored plans alone).

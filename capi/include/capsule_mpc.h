@@ -216,10 +216,9 @@ int32_t capsule_mpc_next_actuation(capsule_mpc_t *handle, double t_actuation_sta
 int32_t capsule_mpc_set_refine(capsule_mpc_t *handle, int32_t mode);
 
 /* Minimum-time shots (on != 0): the plan is the shortest one that ends at the
- * target at rest, re-solved every cycle (scanner cycle: while a capsule is
- * beyond 3 mm of its target); on == 0: the refinement of the stored plans
- * alone. Default without a call: on, under every sampling mode
- * (docs/decisions.md). Any time. */
+ * target at rest, re-solved every cycle, wherever one converges; on == 0:
+ * the refinement of the stored plans alone. Default without a call: on,
+ * under every sampling mode (docs/decisions.md). Any time. */
 int32_t capsule_mpc_set_shooting(capsule_mpc_t *handle, int32_t on);
 
 /* What is known of capsule `capsule`'s (0-based) gain and drag against the

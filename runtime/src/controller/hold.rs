@@ -147,11 +147,23 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         if self.settings.sampling != Sampling::Ideal
             && self.sup.off_model_confirm_exits < HOLD_CONFIRM_OFF_MODEL_EXITS
             && self.factors_differ_from_told()
+            && self.learned_gains_agree()
         {
             HOLD_CONFIRM_SPREAD_OFF_MODEL_M
         } else {
             HOLD_CONFIRM_SPREAD_M
         }
+    }
+
+    /// Whether the capsules' learned gain factors agree within
+    /// `HOLD_CONFIRM_GAIN_AGREEMENT`: the stopping test assumes the centre
+    /// law's common gradient accelerates them alike.
+    fn learned_gains_agree(&self) -> bool {
+        let gains = self.est.applied_scales.iter().take(NX / 2).map(|f| f[0]);
+        let (lo, hi) = gains.fold((f64::INFINITY, 0.0_f64), |(lo, hi), g| {
+            (lo.min(g), hi.max(g))
+        });
+        hi <= lo * (1.0 + HOLD_CONFIRM_GAIN_AGREEMENT)
     }
 
     /// The zero-gradient gap after each hold sample, s.

@@ -238,6 +238,11 @@ pub const HOLD_CONFIRM_SPREAD_OFF_MODEL_M: f64 = 2.0e-3;
 /// ... for this many holds per target: factors learned from wrong frames
 /// (a 2 mm tracking glitch taken for true) otherwise leave hold after hold.
 pub const HOLD_CONFIRM_OFF_MODEL_EXITS: u32 = 2;
+/// ... while the capsules' learned gains agree within this fraction:
+/// where they differ, the centre law's common gradient itself moves them
+/// apart or together, the stopping test misjudges the motion, and the
+/// tighter confirm left hold after hold (docs/decisions.md).
+pub const HOLD_CONFIRM_GAIN_AGREEMENT: f64 = 0.05;
 /// The hold's entry test gives the estimated relative rate this many of
 /// its standard deviations (see `Controller::update_hold`).
 pub const HOLD_ENTRY_RATE_SIGMAS: f64 = 1.0;
