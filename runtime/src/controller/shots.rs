@@ -8,10 +8,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// Whether the solver looks for minimum-time shots (see
     /// `capsule_mpc_solver::shooting`): wherever one converges, up to the
     /// target, once these settings shoot at all (`Shooting::is_on`; the
-    /// explicit tier alone never does). Under the scanner cycle, shots
-    /// within 3 mm of the target once arrived with relative speeds the hold
-    /// could not stop; on the learned factors they are the fastest way back
-    /// from a hold that cannot hold (docs/decisions.md).
+    /// explicit tier alone never does). Near the target under the scanner
+    /// cycle a shot can arrive with a relative speed the hold cannot stop
+    /// (its settling confirm then leaves the hold), but on the learned
+    /// factors it is the fastest way back from a hold that cannot hold:
+    /// limiting shots to beyond 3 mm was slower off the model
+    /// (docs/decisions.md).
     pub(super) fn shots_on(&self) -> bool {
         let s = &self.settings;
         s.shooting.is_on() && s.refine != Refine::None
