@@ -70,18 +70,6 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 )
         };
         let settling = self.law.station.held_s() < HOLD_SETTLING_S;
-        // The frames after entry tell the relative speed better than the
-        // one the entry was decided on: while settling, the estimate
-        // decides; after it, off the model (the tighter confirm), the hold
-        // is left only when every rate within the estimate's uncertainty
-        // (as at entry) stops outside. Not on factors that do not qualify
-        // for the tighter confirm: learned from a glitch, they left hold
-        // after hold (docs/decisions.md).
-        let confirm_spread_m = self.hold_confirm_spread_m();
-        let confirming = settling
-            || (self.law.station.held_s() < HOLD_CONFIRM_WINDOW_S
-                && confirm_spread_m < HOLD_CONFIRM_SPREAD_M);
-        let confirm_rate_std = if settling { 0.0 } else { rate_std };
         let holding = if was {
             slow(s.hold_release_speed_m_per_s)
                 && spread_m <= s.hold_release_position_m
@@ -90,7 +78,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                     && spread_m > HOLD_SPREAD_EXIT_M
                     && !settling)
                 && centre_m <= HOLD_CENTRE_RELEASE_M
-                && (!confirming || can_stop(confirm_spread_m, confirm_rate_std))
+                // The frames after entry tell the relative speed better
+                // than the one the entry was decided on.
+                && (!settling || can_stop(self.hold_confirm_spread_m(), 0.0))
         } else {
             slow(s.hold_enter_speed_m_per_s)
                 && half_spread_m(e, 0.0) <= s.hold_release_position_m
@@ -104,7 +94,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.forget_stall();
         }
         if was && !holding {
-            if confirming && confirm_spread_m < HOLD_CONFIRM_SPREAD_M {
+            if settling && self.hold_confirm_spread_m() < HOLD_CONFIRM_SPREAD_M {
                 self.sup.off_model_confirm_exits += 1;
             }
             // Re-plan from the tables, not from the plan before the hold.
@@ -165,14 +155,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
     }
 
-    /// Whether the capsules' estimated gain factors agree within
+    /// Whether the capsules' learned gain factors agree within
     /// `HOLD_CONFIRM_GAIN_AGREEMENT`: the stopping test assumes the centre
-    /// law's common gradient accelerates them alike. The estimates, not the
-    /// factors in use: a factor not yet significant is used as 1 while its
-    /// estimate may already match the other capsules' (a plant with both
-    /// gains x1.1 learned 1.07 and 1.10, in use 1.00 and 1.10).
+    /// law's common gradient accelerates them alike.
     fn learned_gains_agree(&self) -> bool {
-        let gains = self.est.scales.iter().take(NX / 2).map(|f| f.mean[0]);
+        let gains = self.est.applied_scales.iter().take(NX / 2).map(|f| f[0]);
         let (lo, hi) = gains.fold((f64::INFINITY, 0.0_f64), |(lo, hi), g| {
             (lo.min(g), hi.max(g))
         });

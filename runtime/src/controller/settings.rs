@@ -228,14 +228,7 @@ pub const HOLD_STOP_SPREAD_M: f64 = 2.0e-3;
 /// dither then only watches it drift for seconds. 2 mm (the entry's) and
 /// 3 mm also left holds that would have settled (docs/decisions.md).
 pub const HOLD_CONFIRM_SPREAD_M: f64 = 4.0e-3;
-/// ... and, with the spread below (off the model), after settling until
-/// the hold has run this long, s, when every relative rate within
-/// `HOLD_ENTRY_RATE_SIGMAS` of the estimate would stop beyond it: arrivals
-/// with 0.7-0.9 mm/s of relative speed, which the frames of the first half
-/// second cannot tell from less, otherwise drift to the band's edge over
-/// 2-4 s and leave it (docs/decisions.md).
-pub const HOLD_CONFIRM_WINDOW_S: f64 = 2.0;
-/// ... with this spread once the learned factors differ from the told ones,
+/// ... and this spread once the learned factors differ from the told ones,
 /// m: off the model the arrivals keep relative speeds the dither stops
 /// only near the band's edge, where the capsules then sit for seconds
 /// before leaving it, while a shot from the hold's first half second
