@@ -7,11 +7,12 @@ and five plants off it. Per row: unsettled runs, median / 90th percentile /
 worst settle (9.00 stands for never) and the true frames rejected.
 
     cargo build --release
-    python3 docs/scripts/mismatch_grid.py target/release/capsule-mpc [N] [--told STD]
+    python3 docs/scripts/mismatch_grid.py target/release/capsule-mpc [N] [--told STD] [--disturbance-model MODEL]
 
 With `--told STD` every plant's controller is told the plant's own factors
 with deviation STD (`--calibrated-*-scale`, `--calibrated-std`; the model
-is told 1).
+is told 1). `--disturbance-model drift` (or `constant`) changes how the
+disturbance varies in time, at the same size.
 """
 import statistics
 import sys
@@ -45,12 +46,15 @@ def told(extra, std):
 def main():
     args = sys.argv[1:]
     told_std = pop_option(args, "--told")
+    disturbance_model = pop_option(args, "--disturbance-model")
     binary = args[0]
     seeds = range(1, int(args[1]) + 1) if len(args) > 1 else range(1, 9)
     for sampling in ("constant", "variable"):
         for name, extra in PLANTS:
             if told_std is not None:
                 extra = told(extra, told_std)
+            if disturbance_model is not None:
+                extra = extra + ["--disturbance-model", disturbance_model]
             jobs = [(binary, sampling, extra, t, s) for t in TARGETS for s in seeds]
             with ThreadPoolExecutor(2) as ex:
                 res = list(ex.map(lambda a: run(*a), jobs))
