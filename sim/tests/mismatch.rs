@@ -12,9 +12,8 @@
 //! under constant sampling (measured at most 1.08 x) and 1.6 x under
 //! variable sampling (measured at most 1.54 x: 1.22 s against 0.79 s), and
 //! at most `MAX_SLOW_RUNS` of a plant's 32 runs take longer than twice the
-//! nominal worst (measured at most 1; without the off-model hold confirm
-//! and with shots only beyond 3 mm of the target, variable worsts of
-//! 3.6-4.6 s on three plants instead of 1.5-1.8 s: docs/decisions.md).
+//! nominal worst (measured at most 1; variants of the end game that this
+//! bound rejects: docs/decisions.md).
 //! Issue 26 asks for 1.3 x under both: variable sampling not met yet.
 //! Printed: settled
 //! runs and settle times per plant (docs/known-limits.md quotes them).
