@@ -33,11 +33,15 @@
 //! out of 289 x 80 stored; storing each named sample once (a u16 slot per
 //! kept cell, parallel to `Tables::index_cells`) is 3-9x smaller than per
 //! cell or per sample and loses nothing, since the cell's data would be
-//! the same sample's anyway. The u16 slots cap the count at 65 535
+//! the same sample's anyway. Every named sample's successors on its plan,
+//! up to the plan's arrival, are stored too (19 982 samples in all instead
+//! of 5 498): without them consecutive explicit steps hopped between plans
+//! whose manoeuvres differ, and the explicit tier alone did not settle C.
+//! The u16 slots cap the count at 65 535
 //! samples; the three-capsule module has no explicit data. Per sample: NX + N(N+1)/2 + N +
 //! N NX + 1 + NX + NX^2 doubles (130 for N = 10, NX = 4) and N active-set
 //! flags. The fine end-game plans (from rest near the target) get a sample
-//! each at their start.
+//! at their start and one per later sample with an input.
 
 // Index loops mirror the math (S[k][j], H[a][b]), as in `ocp.rs`.
 #![allow(clippy::needless_range_loop)]
@@ -187,6 +191,23 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
     };
     let fine_slot = fine_slots(&tables.fine.plans, PlanSource::Fine);
     let coasted_fine_slot = fine_slots(&tables.fine.coasted_plans, PlanSource::CoastedFine);
+    // Every named sample's successors up to its plan's arrival, so that the
+    // explicit tier can follow a plan it started on instead of hopping
+    // between plans whose manoeuvres differ.
+    let named: Vec<(PlanSource, usize, usize)> = keys.keys().copied().collect();
+    for (source, plan, offset) in named {
+        let end = match source {
+            PlanSource::Main => chain_end(&tables.plans[plan], steps),
+            PlanSource::Coasted => chain_end(&tables.coasted.plans[plan], steps),
+            PlanSource::Fine => last_input(&tables.fine.plans[plan]),
+            PlanSource::CoastedFine => last_input(&tables.fine.coasted_plans[plan]),
+        };
+        for k in offset + 1..end {
+            let next = keys.len();
+            keys.entry((source, plan, k))
+                .or_insert_with(|| u16::try_from(next).expect("fewer than 65535 explicit samples"));
+        }
+    }
     let mut ordered: Vec<((PlanSource, usize, usize), u16)> = keys.into_iter().collect();
     ordered.sort_by_key(|&(_, slot)| slot);
     let fine_dims = vec![tables.fine.axis.count; m];
@@ -212,7 +233,8 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
                         .iter()
                         .flat_map(|&i| [tables.fine.axis.value(i), 0.0])
                         .collect();
-                    (o, &plans[plan], e0)
+                    let (states, _) = o.rollout(&e0, &plans[plan][..offset]);
+                    (o, &plans[plan], states[offset].clone())
                 }
             };
             linearize(
@@ -239,6 +261,21 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
         fine_slot,
         coasted_fine_slot,
     }
+}
+
+/// One past the last sample a chain of explicit samples follows on a
+/// stored plan: its arrival when reached, else its whole length.
+fn chain_end(p: &crate::grid::PlanEntry, steps: usize) -> usize {
+    if p.reached && p.arrival_samples > 0 {
+        p.arrival_samples.min(steps)
+    } else {
+        steps
+    }
+}
+
+/// One past a fine plan's last non-zero input.
+fn last_input(u: &[f64]) -> usize {
+    u.iter().rposition(|v| *v != 0.0).map_or(0, |k| k + 1)
 }
 
 /// Block-diagonal per-capsule 2x2 matrices as a dense NX x NX matrix.

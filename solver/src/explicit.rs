@@ -119,6 +119,10 @@ impl<'t, 'a> ExplicitSample<'t, 'a> {
     }
 }
 
+/// How many samples along the previous step's plan the explicit tier
+/// looks for the nearest stored state: the longest actuation phase.
+pub const EXPLICIT_SUCCESSORS: usize = 10;
+
 /// Sample `slot`'s relative state component `j` (its linearization point).
 #[inline(always)]
 pub fn explicit_state(t: &Tables, slot: usize, j: usize) -> f64 {
@@ -130,8 +134,9 @@ pub fn explicit_state(t: &Tables, slot: usize, j: usize) -> f64 {
 /// which cannot separate capsules at rest); otherwise the nearest (in
 /// index cells) of the samples named by the cell of `e`, its 2 NX
 /// neighbours along the axes (those the sparse index keeps; a cell is
-/// found by bisection over the kept cells), and the successor of `last`
-/// (the previous step's sample; `usize::MAX`: none). Why not the cell's own
+/// found by bisection over the kept cells), and the `EXPLICIT_SUCCESSORS`
+/// samples after `last` on its plan (the previous step's sample;
+/// `usize::MAX`: none). Why not the cell's own
 /// sample alone: it was chosen by its cost from the cell's centre, and a
 /// cell is 0.1 m/s wide in speed; linearized around it, the deviation
 /// reached 0.1 m/s and consecutive steps jumped between plans.
@@ -203,10 +208,17 @@ pub fn explicit_slot<const NX: usize>(
         }
         stride *= count as u64;
     }
-    if last < t.explicit_count {
-        if let Some(s) = ExplicitSample::get(t, last) {
-            consider(t, e, s.next() as usize, &mut best, &mut best_distance);
-        }
+    // The previous sample's successors along its plan: a phase of several
+    // samples moves the state that many samples on.
+    let mut follow = last;
+    let mut step = 0;
+    while step < EXPLICIT_SUCCESSORS && follow < t.explicit_count {
+        follow = match ExplicitSample::get(t, follow) {
+            Some(s) => s.next() as usize,
+            None => usize::MAX,
+        };
+        consider(t, e, follow, &mut best, &mut best_distance);
+        step += 1;
     }
     if best < t.explicit_count {
         Some(best)
@@ -424,9 +436,10 @@ pub const fn explicit_step_ops(n: usize, nx: usize, k: usize, qp_iterations: usi
     // cells): no floating-point operations.
     let lookup = 6 * nx + 6 * (nx / 2) + 2 * nx;
     // The nearest of the candidates (the cell's sample, its 2 NX axis
-    // neighbours', the last sample's successor): per candidate and axis a
-    // subtraction, a division, a multiply-add, and one compare.
-    let candidates = (2 * nx + 2) * (4 * nx + 1);
+    // neighbours', the last sample's `EXPLICIT_SUCCESSORS` successors): per
+    // candidate and axis a subtraction, a division, a multiply-add, and one
+    // compare.
+    let candidates = (2 * nx + 1 + EXPLICIT_SUCCESSORS as u64) * (4 * nx + 1);
     // Deviation, gradient g0 + F d, bounds, Hessian copy, warm start.
     let setup = nx + 2 * n * nx + 2 * n + n * n + 2 * n;
     // One active-set iteration, worst case.
