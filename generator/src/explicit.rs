@@ -208,8 +208,23 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
                 .or_insert_with(|| u16::try_from(next).expect("fewer than 65535 explicit samples"));
         }
     }
-    let mut ordered: Vec<((PlanSource, usize, usize), u16)> = keys.into_iter().collect();
-    ordered.sort_by_key(|&(_, slot)| slot);
+    // Slots in key order, so a plan's samples are consecutive: the runtime
+    // finds a sample's successors at the next slots, and reads their states
+    // from one stretch of `EXPLICIT_STATE`.
+    let renumber: BTreeMap<u16, u16> = keys
+        .values()
+        .zip(0u16..)
+        .map(|(&first, sorted)| (first, sorted))
+        .collect();
+    let remap = |slots: Vec<u16>| -> Vec<u16> {
+        slots
+            .into_iter()
+            .map(|s| if s == NO_SLOT { NO_SLOT } else { renumber[&s] })
+            .collect()
+    };
+    let (index_slot, coasted_index_slot) = (remap(index_slot), remap(coasted_index_slot));
+    let (fine_slot, coasted_fine_slot) = (remap(fine_slot), remap(coasted_fine_slot));
+    let ordered: Vec<((PlanSource, usize, usize), u16)> = keys.into_keys().zip(0u16..).collect();
     let fine_dims = vec![tables.fine.axis.count; m];
     let mut samples: Vec<ExplicitSample> = ordered
         .par_iter()

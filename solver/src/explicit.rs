@@ -208,17 +208,16 @@ pub fn explicit_slot<const NX: usize>(
         }
         stride *= count as u64;
     }
-    // The previous sample's successors along its plan: a phase of several
+    // The previous sample's successors along its plan (the generator
+    // numbers a plan's samples consecutively; past a plan's last sample the
+    // next plan's are candidates like any other): a phase of several
     // samples moves the state that many samples on.
-    let mut follow = last;
-    let mut step = 0;
-    while step < EXPLICIT_SUCCESSORS && follow < t.explicit_count {
-        follow = match ExplicitSample::get(t, follow) {
-            Some(s) => s.next() as usize,
-            None => usize::MAX,
-        };
-        consider(t, e, follow, &mut best, &mut best_distance);
-        step += 1;
+    if last < t.explicit_count {
+        let mut k = 1;
+        while k <= EXPLICIT_SUCCESSORS {
+            consider(t, e, last + k, &mut best, &mut best_distance);
+            k += 1;
+        }
     }
     if best < t.explicit_count {
         Some(best)
