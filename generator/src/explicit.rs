@@ -34,9 +34,10 @@
 //! kept cell, parallel to `Tables::index_cells`) is 3-9x smaller than per
 //! cell or per sample and loses nothing, since the cell's data would be
 //! the same sample's anyway. Every named sample's successors on its plan,
-//! up to the plan's arrival, are stored too (19 982 samples in all instead
-//! of 5 498): without them consecutive explicit steps hopped between plans
-//! whose manoeuvres differ, and the explicit tier alone did not settle C.
+//! up to the plan's arrival, are stored too (19 982 samples for the
+//! default config, 5 498 of them named), so that consecutive explicit steps
+//! follow one plan instead of hopping between plans whose manoeuvres
+//! differ (docs/decisions.md, "The online solver").
 //! The u16 slots cap the count at 65 535
 //! samples; the three-capsule module has no explicit data. Per sample: NX + N(N+1)/2 + N +
 //! N NX + 1 + NX + NX^2 doubles (130 for N = 10, NX = 4) and N active-set
@@ -203,6 +204,11 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
             PlanSource::CoastedFine => last_input(&tables.fine.coasted_plans[plan]),
         };
         for k in offset + 1..end {
+            // The u16 slots bound the count: a config with more samples
+            // keeps the named ones and as many successors as fit.
+            if keys.len() >= NO_SLOT as usize {
+                break;
+            }
             let next = keys.len();
             keys.entry((source, plan, k))
                 .or_insert_with(|| u16::try_from(next).expect("fewer than 65535 explicit samples"));
