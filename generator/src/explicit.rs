@@ -34,7 +34,7 @@
 //! kept cell, parallel to `Tables::index_cells`) is 3-9x smaller than per
 //! cell or per sample and loses nothing, since the cell's data would be
 //! the same sample's anyway. Every named sample's successors on its plan,
-//! up to the plan's arrival, are stored too (19 982 samples for the
+//! up to the plan's last input, are stored too (20 930 samples for the
 //! default config, 5 498 of them named), so that consecutive explicit steps
 //! follow one plan instead of hopping between plans whose manoeuvres
 //! differ (docs/decisions.md, "The online solver").
@@ -198,8 +198,8 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
     let named: Vec<(PlanSource, usize, usize)> = keys.keys().copied().collect();
     for (source, plan, offset) in named {
         let end = match source {
-            PlanSource::Main => chain_end(&tables.plans[plan], steps),
-            PlanSource::Coasted => chain_end(&tables.coasted.plans[plan], steps),
+            PlanSource::Main => last_input(&tables.plans[plan].plan.u),
+            PlanSource::Coasted => last_input(&tables.coasted.plans[plan].plan.u),
             PlanSource::Fine => last_input(&tables.fine.plans[plan]),
             PlanSource::CoastedFine => last_input(&tables.fine.coasted_plans[plan]),
         };
@@ -284,17 +284,9 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
     }
 }
 
-/// One past the last sample a chain of explicit samples follows on a
-/// stored plan: its arrival when reached, else its whole length.
-fn chain_end(p: &crate::grid::PlanEntry, steps: usize) -> usize {
-    if p.reached && p.arrival_samples > 0 {
-        p.arrival_samples.min(steps)
-    } else {
-        steps
-    }
-}
-
-/// One past a fine plan's last non-zero input.
+/// One past a plan's last non-zero input: its arrival and the samples that
+/// finish it (a chain that stopped at the arrival left the last inputs to
+/// another plan's sample).
 fn last_input(u: &[f64]) -> usize {
     u.iter().rposition(|v| *v != 0.0).map_or(0, |k| k + 1)
 }
