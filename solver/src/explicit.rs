@@ -136,7 +136,8 @@ pub fn explicit_state(t: &Tables, slot: usize, j: usize) -> f64 {
 /// neighbours along the axes (those the sparse index keeps; a cell is
 /// found by bisection over the kept cells), and the `EXPLICIT_SUCCESSORS`
 /// samples after `last` on its plan (the previous step's sample;
-/// `usize::MAX`: none). Why not the cell's own
+/// `usize::MAX`: none); outside the index, those successors alone. Why not
+/// the cell's own
 /// sample alone: it was chosen by its cost from the cell's centre, and a
 /// cell is 0.1 m/s wide in speed; linearized around it, the deviation
 /// reached 0.1 m/s and consecutive steps jumped between plans.
@@ -154,17 +155,58 @@ pub fn explicit_slot<const NX: usize>(
     } else {
         Section::ExplicitIndexSlot
     };
+    let mut best = usize::MAX;
+    let mut best_distance = f64::INFINITY;
     let mut idx = [0usize; NX];
     let mut flat = 0u64;
+    let mut in_range = true;
     let mut j = 0;
     while j < NX {
         let axis = index_axis(t, j);
-        idx[j] = axis_nearest(&axis, e[j])?;
+        match axis_nearest(&axis, e[j]) {
+            Some(i) => idx[j] = i,
+            None => {
+                // Outside the index (a plan's excursion can reach beyond
+                // it): the previous sample's successors are the candidates.
+                in_range = false;
+                break;
+            }
+        }
         flat = flat * axis.count as u64 + idx[j] as u64;
         j += 1;
     }
-    let mut best = usize::MAX;
-    let mut best_distance = f64::INFINITY;
+    if in_range {
+        index_candidates(t, e, slots, &idx, flat, &mut best, &mut best_distance);
+    }
+    // The previous sample's successors along its plan (the generator
+    // numbers a plan's samples consecutively; past a plan's last sample the
+    // next plan's are candidates like any other): a phase of several
+    // samples moves the state that many samples on.
+    if last < t.explicit_count {
+        let mut k = 1;
+        while k <= EXPLICIT_SUCCESSORS {
+            consider(t, e, last + k, &mut best, &mut best_distance);
+            k += 1;
+        }
+    }
+    if best < t.explicit_count {
+        Some(best)
+    } else {
+        None
+    }
+}
+
+/// The samples named by the kept cell `flat` (multi-index `idx`) and its
+/// 2 NX axis neighbours, nearest kept in `best`.
+fn index_candidates<const NX: usize>(
+    t: &Tables,
+    e: &[f64; NX],
+    slots: Section,
+    idx: &[usize; NX],
+    flat: u64,
+    best: &mut usize,
+    best_distance: &mut f64,
+) {
     // The sparse index keeps only cells near stored plans: the cell and its
     // neighbours are found among the kept cells by bisection (cells not
     // kept are skipped). The cell's lower bound splits the kept cells:
@@ -175,8 +217,8 @@ pub fn explicit_slot<const NX: usize>(
         t,
         e,
         slot_of_cell(t, slots, flat, split, cells),
-        &mut best,
-        &mut best_distance,
+        best,
+        best_distance,
     );
     // Neighbours: stride of axis j = product of the later axes' counts.
     // Kept cells are distinct integers, so at most `stride` of them lie
@@ -195,7 +237,7 @@ pub fn explicit_slot<const NX: usize>(
         if idx[j] > 0 {
             let lo = split.saturating_sub(span);
             let slot = slot_of_cell(t, slots, flat - stride, lo, split);
-            consider(t, e, slot, &mut best, &mut best_distance);
+            consider(t, e, slot, best, best_distance);
         }
         if idx[j] + 1 < count {
             let hi = if split + span + 1 < cells {
@@ -204,25 +246,9 @@ pub fn explicit_slot<const NX: usize>(
                 cells
             };
             let slot = slot_of_cell(t, slots, flat + stride, split, hi);
-            consider(t, e, slot, &mut best, &mut best_distance);
+            consider(t, e, slot, best, best_distance);
         }
         stride *= count as u64;
-    }
-    // The previous sample's successors along its plan (the generator
-    // numbers a plan's samples consecutively; past a plan's last sample the
-    // next plan's are candidates like any other): a phase of several
-    // samples moves the state that many samples on.
-    if last < t.explicit_count {
-        let mut k = 1;
-        while k <= EXPLICIT_SUCCESSORS {
-            consider(t, e, last + k, &mut best, &mut best_distance);
-            k += 1;
-        }
-    }
-    if best < t.explicit_count {
-        Some(best)
-    } else {
-        None
     }
 }
 
@@ -342,7 +368,8 @@ pub fn load_qp<const NX: usize, const N: usize, const K: usize>(
 /// The explicit plan for relative state `e` into `out` (`coasted`:
 /// constant sampling's tables; `last`: the previous step's slot, or
 /// `usize::MAX`; `warm`: the QP's starting active set, None for the stored
-/// sample's); None outside the index and the fine grid.
+/// sample's); None outside the index and the fine grid when no previous
+/// sample's successor is a candidate.
 #[allow(clippy::too_many_arguments)]
 pub fn explicit_plan<const NX: usize, const N: usize, const K: usize>(
     t: &Tables,
