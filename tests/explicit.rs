@@ -405,14 +405,12 @@ fn certified_operation_bound_covers_the_bench_states() {
 }
 
 /// The explicit tier alone in the closed loop, as measured (docs/results.md,
-/// "The explicit tier alone"): ideal sampling, no disturbance. On the sparse index (each kept
-/// cell's sample chosen among the samples of its neighbourhood) A's end
-/// game cycled through stored samples (speeds up to 0.15 m/s, 0.75 mm off
-/// at 3 s) until the shortest main-grid plans were finished with one
-/// sample: it now settles in 0.709 s (0.89 s on the dense index). C ends
-/// 2.61 mm off at 3 s (its fallbacks re-plan the legs below 20 mm/s; 1.93
-/// mm when they waited for rest). Asserted: the measured values with a
-/// small margin, no refinement ran, and the refinement still settles A.
+/// "The explicit tier alone"): ideal sampling, no disturbance. The tier
+/// follows the stored plan it started on (each named sample's successors
+/// are stored up to the plan's last input): A settles in 0.519 s, within
+/// issue 15's 10 % of the refined 0.499 s, and C in 0.750 s (refined
+/// 0.679 s). Asserted: those with a small margin, no refinement ran, and
+/// the refinement still settles A.
 #[test]
 fn explicit_tier_alone_closed_loop_as_measured() {
     use capsule_mpc_generator::config::RefineMode;
@@ -433,7 +431,7 @@ fn explicit_tier_alone_closed_loop_as_measured() {
         .metrics
         .settle_time_s
         .expect("A settles with the explicit tier alone");
-    assert!(settle <= 0.75, "A settled at {settle} s");
+    assert!(settle <= 0.55, "A settled at {settle} s");
     assert!(
         a.metrics.final_position_error_m < 1e-3,
         "A ends {} m off",
@@ -442,11 +440,11 @@ fn explicit_tier_alone_closed_loop_as_measured() {
     let tiers = a.tier_cycles.expect("tier counts");
     assert_eq!(tiers.refined, 0, "refine none ran the refinement");
     let c = run_with(Scenario::C, RefineMode::None);
-    assert!(
-        c.metrics.final_position_error_m < 3.0e-3,
-        "C ends {} m off",
-        c.metrics.final_position_error_m
-    );
+    let settle_c = c
+        .metrics
+        .settle_time_s
+        .expect("C settles with the explicit tier alone");
+    assert!(settle_c <= 0.8, "C settled at {settle_c} s");
     let refined = run_with(Scenario::A, RefineMode::PerSample);
     let settle_refined = refined.metrics.settle_time_s.expect("A settles refined");
     assert!(
