@@ -23,7 +23,14 @@ fn reach_with(
     step_m: f64,
     start_m: Vec<f64>,
 ) -> (Vec<ReachPoint>, ReachSummary) {
-    let opts = ReachOptions {
+    let points = reach_map(config, &ideal_options(range_m, step_m, start_m), &|| {}).unwrap();
+    let summary = ReachSummary::of(&points);
+    (points, summary)
+}
+
+/// A grid from `start_m` under ideal sampling with no disturbance.
+fn ideal_options(range_m: f64, step_m: f64, start_m: Vec<f64>) -> ReachOptions {
+    ReachOptions {
         range_m,
         step_m,
         sampling: Sampling::Ideal,
@@ -37,10 +44,7 @@ fn reach_with(
         known_factors: None,
         known_factor_std: capsule_mpc_sim::closed_loop::KNOWN_FACTOR_STD,
         shooting: None,
-    };
-    let points = reach_map(config, &opts, &|| {}).unwrap();
-    let summary = ReachSummary::of(&points);
-    (points, summary)
+    }
 }
 
 fn failures(points: &[ReachPoint]) -> Vec<String> {
@@ -103,6 +107,42 @@ fn the_explicit_law_alone_reaches_every_target_of_the_4_cm_grid() {
     // Measured 1.06 / 1.15.
     assert!(median <= 1.15 * 1.15, "median ratio {median}");
     assert!(worst <= 1.4 * 1.15, "worst ratio {worst}: {s:?}");
+}
+
+/// Issue 26's scanner floor for constant sampling: the 1 cm grid over
+/// +-4 cm (80 targets) x seeds 1-8 with the paper disturbance, strict
+/// settle within 1.3 x the coasted schedule's minimum time at the median
+/// and 1.8 x at worst, every run.
+#[test]
+fn the_constant_scanner_grid_settles_near_its_schedule_bound() {
+    let config = Config::embedded_default();
+    let mut ratios = Vec::new();
+    for seed in 1..=8 {
+        let mut opts = ideal_options(0.04, 0.01, Vec::new());
+        opts.sampling = Sampling::Constant;
+        opts.disturbance = DisturbanceLevel::Paper;
+        opts.seed = seed;
+        let points = reach_map(&config, &opts, &|| {}).unwrap();
+        assert!(
+            failures(&points).is_empty(),
+            "seed {seed}: {:?}",
+            failures(&points)
+        );
+        for p in &points {
+            let r = p
+                .settle_over_schedule_bound
+                .expect("coasted bound on the 1 cm grid");
+            ratios.push((r, seed, cm(&p.target_m)));
+        }
+    }
+    ratios.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let median = ratios[ratios.len() / 2].0;
+    let worst = ratios.last().unwrap();
+    println!("constant, settle / coasted bound: median {median:.3}, worst {worst:?}");
+    // Measured 1.00 / 1.66; the worst was 2.31 ((0, -1) cm, seed 7) while
+    // the hold was entered only below 4 mm/s.
+    assert!(median <= 1.3, "median ratio {median}");
+    assert!(worst.0 <= 1.8, "worst ratio {worst:?}");
 }
 
 /// Off the table lattice, from a start that is not the origin, over the
