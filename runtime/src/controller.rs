@@ -580,13 +580,27 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     /// Samples to play before the next tracking phase (the switching rule;
-    /// 1 when the host allows no more).
+    /// 1 when the host allows no more). The law alone under variable
+    /// sampling plays a plan that ends within the phase to its end: its
+    /// stored plans were solved back to back, and a coast inside the final
+    /// manoeuvre misses the target (the refinement re-solves the plan for
+    /// the phase instead, `replan_for_phase`).
     fn phase_length(&self, e: &[f64; NX], n_max: usize) -> usize {
         if n_max <= 1 {
-            1
-        } else {
-            self.actuation_length(e, n_max.min(S::N))
+            return 1;
         }
+        let n_max = n_max.min(S::N);
+        let n = self.actuation_length(e, n_max);
+        if self.settings.refine == Refine::None && self.settings.sampling == Sampling::Variable {
+            let end = acting_samples(
+                self.solver.plan(),
+                IDLE_GRADIENT_FRACTION * S::U_MAX_T_PER_M,
+            );
+            if end > n && end <= n_max {
+                return end;
+            }
+        }
+        n
     }
 
     /// Refines the plan from `e`: one solve (SQP_ITERATIONS Gauss-Newton

@@ -20,3 +20,11 @@ pub(super) fn leading_idle_samples(plan: &[f64], idle_t_per_m: f64) -> usize {
         .position(|u| libm::fabs(*u) > idle_t_per_m)
         .unwrap_or(plan.len())
 }
+
+/// Samples of `plan` up to and including its last one whose gradient is
+/// above `idle_t_per_m` in magnitude (0 when every sample is idle).
+pub(super) fn acting_samples(plan: &[f64], idle_t_per_m: f64) -> usize {
+    plan.iter()
+        .rposition(|u| libm::fabs(*u) > idle_t_per_m)
+        .map_or(0, |k| k + 1)
+}
