@@ -194,12 +194,10 @@ pub const SHOTS_CARRY_FROM_CAPSULES: usize = 3;
 
 /// Default hold entry: 0.7 of the 1 mm settle tolerance, m.
 pub const HOLD_ENTER_POSITION_M: f64 = 0.7e-3;
-/// Default hold entry speed, m/s: above the 5 mm/s settle tolerance. The
-/// hold brakes the group's common speed (critically damped at
-/// `HOLD_NATURAL_FREQUENCY_RAD_PER_S`: from 8 mm/s the centre moves at most
-/// v / (w e) = 0.3 mm); an arrival sent back to the plans at such speeds
-/// is swung about the target (4 and 5 mm/s: docs/decisions.md).
-pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 8.0e-3;
+/// Default hold entry speed: the 5 mm/s settle tolerance, m/s. The hold
+/// brakes the group's common speed; below the tolerance an arrival sent
+/// back to the plans is swung about the target (4 mm/s: docs/decisions.md).
+pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 5.0e-3;
 /// Default hold release: 0.8 of the settle tolerance, m (hysteresis keeps
 /// estimate noise from toggling the mode).
 pub const HOLD_RELEASE_POSITION_M: f64 = 1.0e-3;
