@@ -7,12 +7,13 @@ and five plants off it. Per row: unsettled runs, median / 90th percentile /
 worst settle (9.00 stands for never) and the true frames rejected.
 
     cargo build --release
-    python3 docs/scripts/mismatch_grid.py target/release/capsule-mpc [N] [--told STD] [--disturbance-model MODEL]
+    python3 docs/scripts/mismatch_grid.py target/release/capsule-mpc [N] [--told STD] [--disturbance-model MODEL] [--refine MODE]
 
 With `--told STD` every plant's controller is told the plant's own factors
 with deviation STD (`--calibrated-*-scale`, `--calibrated-std`; the model
 is told 1). `--disturbance-model drift` (or `constant`) changes how the
-disturbance varies in time, at the same size.
+disturbance varies in time, at the same size. `--refine none` measures the
+explicit law alone.
 """
 import statistics
 import sys
@@ -47,6 +48,7 @@ def main():
     args = sys.argv[1:]
     told_std = pop_option(args, "--told")
     disturbance_model = pop_option(args, "--disturbance-model")
+    refine = pop_option(args, "--refine")
     binary = args[0]
     seeds = range(1, int(args[1]) + 1) if len(args) > 1 else range(1, 9)
     for sampling in ("constant", "variable"):
@@ -55,6 +57,8 @@ def main():
                 extra = told(extra, told_std)
             if disturbance_model is not None:
                 extra = extra + ["--disturbance-model", disturbance_model]
+            if refine is not None:
+                extra = extra + ["--refine", refine]
             jobs = [(binary, sampling, extra, t, s) for t in TARGETS for s in seeds]
             with ThreadPoolExecutor(2) as ex:
                 res = list(ex.map(lambda a: run(*a), jobs))
