@@ -142,9 +142,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// model `HOLD_CONFIRM_SPREAD_OFF_MODEL_M` for the first
     /// `HOLD_CONFIRM_OFF_MODEL_EXITS` holds left so per target (factors
     /// learned from frames that were wrong would otherwise leave every
-    /// hold).
+    /// hold), and only while shots are on: without them the hold would be
+    /// left for the model's plans, not for a shot on the learned factors.
     fn hold_confirm_spread_m(&self) -> f64 {
         if self.settings.sampling != Sampling::Ideal
+            && self.shots_on()
             && self.sup.off_model_confirm_exits < HOLD_CONFIRM_OFF_MODEL_EXITS
             && self.factors_differ_from_told()
             && self.learned_gains_agree()
