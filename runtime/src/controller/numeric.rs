@@ -28,3 +28,19 @@ pub(super) fn acting_samples(plan: &[f64], idle_t_per_m: f64) -> usize {
         .rposition(|u| libm::fabs(*u) > idle_t_per_m)
         .map_or(0, |k| k + 1)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn idle_samples_are_counted_from_either_end() {
+        let plan = [0.0, 1e-6, 0.02, -0.01, 0.0, 1e-6, 0.0];
+        assert_eq!(leading_idle_samples(&plan, 1e-5), 2);
+        // Up to and including the last acting sample (index 3).
+        assert_eq!(acting_samples(&plan, 1e-5), 4);
+        assert_eq!(acting_samples(&[0.0; 5], 1e-5), 0);
+        assert_eq!(leading_idle_samples(&[0.0; 5], 1e-5), 5);
+        assert_eq!(acting_samples(&[-0.04], 1e-5), 1);
+    }
+}
