@@ -195,8 +195,9 @@ pub const SHOTS_CARRY_FROM_CAPSULES: usize = 3;
 /// Default hold entry: 0.7 of the 1 mm settle tolerance, m.
 pub const HOLD_ENTER_POSITION_M: f64 = 0.7e-3;
 /// Default hold entry speed: the 5 mm/s settle tolerance, m/s. The hold
-/// brakes the group's common speed; below the tolerance an arrival sent
-/// back to the plans is swung about the target (4 mm/s: docs/decisions.md).
+/// brakes the group's common speed, where the plans, given an arrival in
+/// the band at a few mm/s, swing the group about the target
+/// (docs/decisions.md, "Hold entry and exit").
 pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 5.0e-3;
 /// Default hold release: 0.8 of the settle tolerance, m (hysteresis keeps
 /// estimate noise from toggling the mode).
