@@ -202,22 +202,31 @@ impl<
             tier: Tier::Explicit,
         };
         let coasted = self.schedule.coasted();
+        // The stored plans keep every position error within the state
+        // bound; beyond it no sample's linearization holds (followed out
+        // there, a capsule went 150 mm off): out of range, the fallback.
+        let beyond_bound = (0..NX / 2).any(|i| !(libm::fabs(e[2 * i]) <= S::POSITION_BOUND_M));
         let warm = if self.explicit_slot == usize::MAX {
             None
         } else {
             Some(&self.explicit_active)
         };
         let tables = &S::TABLES;
-        match explicit_plan(
-            tables,
-            S::U_MAX_T_PER_M,
-            e,
-            coasted,
-            self.explicit_slot,
-            warm,
-            &mut self.qp,
-            &mut self.explicit_plan,
-        ) {
+        let found = if beyond_bound {
+            None
+        } else {
+            explicit_plan(
+                tables,
+                S::U_MAX_T_PER_M,
+                e,
+                coasted,
+                self.explicit_slot,
+                warm,
+                &mut self.qp,
+                &mut self.explicit_plan,
+            )
+        };
+        match found {
             Some(out) => {
                 self.explicit_ready = true;
                 self.explicit_slot = out.slot;
