@@ -115,10 +115,42 @@ fn the_explicit_law_alone_reaches_every_target_of_the_4_cm_grid() {
 /// and 1.8 x at worst, every run.
 #[test]
 fn the_constant_scanner_grid_settles_near_its_schedule_bound() {
-    let config = Config::embedded_default();
+    let ratios = constant_scanner_ratios(&Config::embedded_default());
+    let median = ratios[ratios.len() / 2].0;
+    let worst = ratios.last().unwrap();
+    println!("constant, settle / coasted bound: median {median:.3}, worst {worst:?}");
+    // Measured 1.00 / 1.66; the worst was 2.31 ((0, -1) cm, seed 7) while
+    // the hold was entered only below 4 mm/s.
+    assert!(median <= 1.3, "median ratio {median}");
+    assert!(worst.0 <= 1.8, "worst ratio {worst:?}");
+}
+
+/// The explicit law alone on the same grid: within 1.15 x the refined
+/// floors (1.3 / 1.8) but for at most two runs, none far beyond. Measured
+/// 1.07 / 2.09, one run above 2.07 ((0, -1) cm, seed 3, 0.50 s); 34 runs
+/// above 2x (worst 5.97) while the hold took the law's arrivals only below
+/// 5 mm/s, as the refined loop's.
+#[test]
+fn the_explicit_law_alone_settles_the_constant_scanner_grid_near_its_schedule_bound() {
+    let mut config = Config::embedded_default();
+    config.controller.refine = RefineMode::None;
+    let ratios = constant_scanner_ratios(&config);
+    let median = ratios[ratios.len() / 2].0;
+    let worst = ratios.last().unwrap();
+    let beyond: Vec<_> = ratios.iter().filter(|r| r.0 > 1.8 * 1.15).collect();
+    println!("law alone, constant: median {median:.3}, worst {worst:?}, beyond {beyond:?}");
+    assert!(median <= 1.3 * 1.15, "median ratio {median}");
+    assert!(beyond.len() <= 2, "runs above 2.07: {beyond:?}");
+    assert!(worst.0 <= 2.5, "worst ratio {worst:?}");
+}
+
+/// Settle over the coasted schedule's bound on the 1 cm grid, constant
+/// sampling, seeds 1-8, sorted: (ratio, seed, target in cm). Every run
+/// settles.
+fn constant_scanner_ratios(config: &Config) -> Vec<(f64, u64, Vec<f64>)> {
     let mut ratios = Vec::new();
     for seed in 1..=8 {
-        let points = scanner_points(&config, Sampling::Constant, seed);
+        let points = scanner_points(config, Sampling::Constant, seed);
         assert!(
             failures(&points).is_empty(),
             "seed {seed}: {:?}",
@@ -132,13 +164,7 @@ fn the_constant_scanner_grid_settles_near_its_schedule_bound() {
         }
     }
     ratios.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let median = ratios[ratios.len() / 2].0;
-    let worst = ratios.last().unwrap();
-    println!("constant, settle / coasted bound: median {median:.3}, worst {worst:?}");
-    // Measured 1.00 / 1.66; the worst was 2.31 ((0, -1) cm, seed 7) while
-    // the hold was entered only below 4 mm/s.
-    assert!(median <= 1.3, "median ratio {median}");
-    assert!(worst.0 <= 1.8, "worst ratio {worst:?}");
+    ratios
 }
 
 /// The 1 cm grid over +-4 cm under the scanner cycle `sampling`, paper

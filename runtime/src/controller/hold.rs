@@ -71,7 +71,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         };
         let settling = self.law.station.held_s() < HOLD_SETTLING_S;
         let holding = if was {
-            slow(s.hold_release_speed_m_per_s)
+            slow(self.hold_speeds_m_per_s().1)
                 && spread_m <= s.hold_release_position_m
                 && !(NX / 2 <= HOLD_EARLY_EXIT_MAX_CAPSULES
                     && outside
@@ -82,10 +82,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 // than the one the entry was decided on.
                 && (!settling || can_stop(self.hold_confirm_spread_m(), 0.0))
         } else {
-            slow(s.hold_enter_speed_m_per_s)
+            slow(self.hold_speeds_m_per_s().0)
                 && half_spread_m(e, 0.0) <= s.hold_release_position_m
                 && half_spread_m(e, HOLD_DRIFT_HORIZON_S) <= s.hold_enter_position_m
                 && centre_m <= HOLD_CENTRE_ENTER_M
+                && self.centre_stops_near(e)
                 && can_stop(HOLD_STOP_SPREAD_M, rate_std)
         };
         if !was && holding {
@@ -166,6 +167,42 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             (lo.min(g), hi.max(g))
         });
         hi <= lo * (1.0 + HOLD_CONFIRM_GAIN_AGREEMENT)
+    }
+
+    /// Whether the hold is entered at the explicit law's wider speeds: the
+    /// law alone under the scanner cycle (`EXPLICIT_HOLD_ENTER_SPEED_M_PER_S`;
+    /// under ideal sampling its plans, played from exact states, arrive
+    /// at rest, and the wider entry measured slower).
+    fn explicit_hold_entry(&self) -> bool {
+        self.settings.refine == Refine::None && self.settings.sampling != Sampling::Ideal
+    }
+
+    /// Whether the centre law brings the group's centre to rest within
+    /// `HOLD_CENTRE_RELEASE_M` (first order: the centre plus its speed over
+    /// the law's natural frequency); always true outside the explicit
+    /// entry, whose speeds are the band's.
+    fn centre_stops_near(&self, e: &[f64; NX]) -> bool {
+        if !self.explicit_hold_entry() {
+            return true;
+        }
+        let (_, mean_v) = capsule_means(e);
+        let stop_m = capsule_centre_m(e) + mean_v / HOLD_NATURAL_FREQUENCY_RAD_PER_S;
+        libm::fabs(stop_m) <= HOLD_CENTRE_RELEASE_M
+    }
+
+    /// The speeds below which the hold is entered and kept, m/s.
+    fn hold_speeds_m_per_s(&self) -> (f64, f64) {
+        let s = &self.settings;
+        if self.explicit_hold_entry() {
+            (
+                s.hold_enter_speed_m_per_s
+                    .max(EXPLICIT_HOLD_ENTER_SPEED_M_PER_S),
+                s.hold_release_speed_m_per_s
+                    .max(EXPLICIT_HOLD_RELEASE_SPEED_M_PER_S),
+            )
+        } else {
+            (s.hold_enter_speed_m_per_s, s.hold_release_speed_m_per_s)
+        }
     }
 
     /// The zero-gradient gap after each hold sample, s.
