@@ -104,7 +104,8 @@ fn the_explicit_law_alone_reaches_every_target_of_the_4_cm_grid() {
     config.controller.refine = RefineMode::None;
     let (points, s) = reach_with(&config, 0.04, 0.01, Vec::new());
     let (median, worst) = settled_grid_ratios("law alone", &points, &s);
-    // Measured 1.06 / 1.15.
+    // Measured 1.06 / 1.19 (1.15 while the law alone entered the hold
+    // only below 5 mm/s).
     assert!(median <= 1.15 * 1.15, "median ratio {median}");
     assert!(worst <= 1.4 * 1.15, "worst ratio {worst}: {s:?}");
 }

@@ -170,11 +170,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     }
 
     /// Whether the hold is entered at the explicit law's wider speeds: the
-    /// law alone under the scanner cycle (`EXPLICIT_HOLD_ENTER_SPEED_M_PER_S`;
-    /// under ideal sampling its plans, played from exact states, arrive
-    /// at rest, and the wider entry measured slower).
+    /// law alone (`EXPLICIT_HOLD_ENTER_SPEED_M_PER_S`).
     fn explicit_hold_entry(&self) -> bool {
-        self.settings.refine == Refine::None && self.settings.sampling != Sampling::Ideal
+        self.settings.refine == Refine::None
     }
 
     /// Whether the centre law brings the group's centre to rest within
