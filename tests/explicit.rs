@@ -80,7 +80,6 @@ fn the_emitted_samples_are_the_generators() {
         assert_eq!(&s.state[..], &sample_state(slot)[..]);
         assert_eq!(s.source as u8, e.source());
         assert_eq!((s.plan, s.offset), (e.plan() as usize, e.offset() as usize));
-        assert_eq!(s.next, e.next());
         let hessian: Vec<f64> = (0..s.hessian.len()).map(|i| e.hessian(i)).collect();
         assert_eq!(s.hessian, hessian);
         let gradient: Vec<f64> = (0..spec::N).map(|a| e.gradient(a)).collect();

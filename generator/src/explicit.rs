@@ -101,9 +101,6 @@ pub struct ExplicitSample {
     /// of the explicit plan without a rollout.
     pub cost_gradient: Vec<f64>,
     pub cost_hessian: Vec<f64>,
-    /// Slot of the same plan's next sample, when stored (`NO_SLOT`
-    /// otherwise): the explicit tier's continuation candidate.
-    pub next: u16,
 }
 
 /// Every explicit sample and, per index cell / fine grid point, its slot
@@ -128,7 +125,7 @@ impl ExplicitTables {
     /// sample's source/plan/offset 5; the state in `EXPLICIT_STATE`).
     pub fn bytes(&self, n: usize, nx: usize) -> usize {
         let doubles = nx + n * (n + 1) / 2 + n + n * nx + 1 + nx + nx * nx;
-        self.samples.len() * (8 * doubles + n + 7)
+        self.samples.len() * (8 * doubles + n + 5)
             + 2 * (self.index_slot.len()
                 + self.coasted_index_slot.len()
                 + self.fine_slot.len()
@@ -232,7 +229,7 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
     let (fine_slot, coasted_fine_slot) = (remap(fine_slot), remap(coasted_fine_slot));
     let ordered: Vec<((PlanSource, usize, usize), u16)> = keys.into_keys().zip(0u16..).collect();
     let fine_dims = vec![tables.fine.axis.count; m];
-    let mut samples: Vec<ExplicitSample> = ordered
+    let samples: Vec<ExplicitSample> = ordered
         .par_iter()
         .map(|&((source, plan, offset), _)| {
             let (ocp, u, start) = match source {
@@ -269,12 +266,6 @@ pub fn build_explicit(config: &Config, tables: &Tables) -> ExplicitTables {
             )
         })
         .collect();
-    let slot_by_key: BTreeMap<(PlanSource, usize, usize), u16> = ordered.iter().copied().collect();
-    for s in &mut samples {
-        s.next = *slot_by_key
-            .get(&(s.source, s.plan, s.offset + 1))
-            .unwrap_or(&NO_SLOT);
-    }
     ExplicitTables {
         samples,
         index_slot,
@@ -459,7 +450,6 @@ pub fn linearize(
         cost,
         cost_gradient: cost_grad,
         cost_hessian: cost_hess.into_iter().flatten().collect(),
-        next: NO_SLOT,
     }
 }
 

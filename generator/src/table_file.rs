@@ -170,7 +170,6 @@ pub fn encode(
                 s.source as u8,
                 u16::try_from(s.plan).expect("explicit plan index fits u16"),
                 u16::try_from(s.offset).expect("explicit offset fits u16"),
-                s.next,
                 &s.active,
             );
             w.f64s(Section::ExplicitState, s.state.iter().copied());

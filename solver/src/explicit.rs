@@ -65,11 +65,6 @@ impl<'t, 'a> ExplicitSample<'t, 'a> {
         self.tables
             .record_u16(self.at, self.tables.explicit_layout.offset())
     }
-    /// Slot of the same plan's next sample (NO_SLOT: not stored).
-    pub fn next(&self) -> u16 {
-        self.tables
-            .record_u16(self.at, self.tables.explicit_layout.next())
-    }
     /// Condensed Hessian, upper triangle row by row, entry `idx`.
     #[inline(always)]
     pub fn hessian(&self, idx: usize) -> f64 {

@@ -18,7 +18,7 @@
 /// First eight bytes of every table file.
 pub const MAGIC: [u8; 8] = *b"CMPCTBL\0";
 /// The layout version this build reads and writes.
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 /// Bytes of the fixed header before the directory.
 pub const HEADER_BYTES: usize = 64;
 /// Bytes of one directory entry.
@@ -287,11 +287,8 @@ impl ExplicitLayout {
     pub const fn offset(&self) -> usize {
         self.plan() + 2
     }
-    pub const fn next(&self) -> usize {
-        self.offset() + 2
-    }
     pub const fn active(&self) -> usize {
-        self.next() + 2
+        self.offset() + 2
     }
     /// Bytes of one record (a multiple of 8).
     pub const fn record_bytes(&self) -> usize {

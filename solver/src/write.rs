@@ -94,7 +94,6 @@ impl TableWriter {
         source: u8,
         plan: u16,
         offset: u16,
-        next: u16,
         active: &[i8],
     ) {
         let layout = ExplicitLayout {
@@ -135,7 +134,6 @@ impl TableWriter {
         out.push(source);
         out.extend_from_slice(&plan.to_le_bytes());
         out.extend_from_slice(&offset.to_le_bytes());
-        out.extend_from_slice(&next.to_le_bytes());
         out.extend(active.iter().map(|&a| a as u8));
         out.resize(start + layout.record_bytes(), 0);
     }
