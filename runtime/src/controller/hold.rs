@@ -177,12 +177,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     /// Whether the centre law brings the group's centre to rest within
     /// `HOLD_CENTRE_RELEASE_M` (first order: the centre plus its speed over
-    /// the law's natural frequency); always true outside the explicit
-    /// entry, whose speeds are the band's.
+    /// the law's natural frequency). At the band's entry speed (5 mm/s,
+    /// 0.5 mm) from within `HOLD_CENTRE_ENTER_M` it always does; it
+    /// decides at the explicit law's wider speeds.
     fn centre_stops_near(&self, e: &[f64; NX]) -> bool {
-        if !self.explicit_hold_entry() {
-            return true;
-        }
         let (_, mean_v) = capsule_means(e);
         let stop_m = capsule_centre_m(e) + mean_v / HOLD_NATURAL_FREQUENCY_RAD_PER_S;
         libm::fabs(stop_m) <= HOLD_CENTRE_RELEASE_M

@@ -199,7 +199,8 @@ pub const HOLD_ENTER_POSITION_M: f64 = 0.7e-3;
 /// the band at a few mm/s, swing the group about the target
 /// (docs/decisions.md, "Hold entry and exit").
 pub const HOLD_ENTER_SPEED_M_PER_S: f64 = 5.0e-3;
-/// The explicit law alone enters the hold up to this speed, m/s, where
+/// The explicit law alone enters the hold up to this speed (or the
+/// setting's `hold_enter_speed_m_per_s`, when larger), m/s, where
 /// the centre law brings the group's centre to rest within
 /// `HOLD_CENTRE_RELEASE_M`: its stored plans cannot be re-solved for an
 /// arrival that keeps a common speed of 10-30 mm/s, and played on from
