@@ -18,7 +18,7 @@
 //! Printed: settled
 //! runs and settle times per plant (docs/known-limits.md quotes them).
 
-use capsule_mpc_generator::config::Config;
+use capsule_mpc_generator::config::{Config, RefineMode};
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling};
 use capsule_mpc_sim::mismatch::PlantMismatch;
 use capsule_mpc_sim::plant::DisturbanceLevel;
@@ -144,6 +144,56 @@ fn off_model_capsules_settle_near_the_nominal_times() {
             "{sampling:?} nominal: median {:.2} s, worst {:.2} s",
             nominal.0, nominal.1
         );
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The explicit law alone under variable sampling swings the capsules at
+/// 100-400 mm/s with frames 0.22 s apart: off the model the prediction
+/// over such a phase leaves even the widened gate. Those frames agree with
+/// one another and their run starts within the model's drift bound, so
+/// the gate follows them at the third frame instead of rejecting 20 as a
+/// glitch. Asserted over the 24-target mismatch grid (+-4 cm, 2 cm steps),
+/// seeds 1-2, the paper's disturbance: at most 1 % of the true frames
+/// rejected on the two plants that rejected most (before: 1.6 % with the
+/// drag x0.8, 2.8 % with (x1.2, x0.8); measured 0.22 % / 0.45 %).
+#[test]
+fn the_law_alone_follows_capsules_off_the_model_instead_of_rejecting_them() {
+    let mut config = Config::embedded_default();
+    config.controller.refine = RefineMode::None;
+    let steps_cm = [-4.0, -2.0, 0.0, 2.0, 4.0];
+    let targets: Vec<(f64, f64)> = steps_cm
+        .iter()
+        .flat_map(|&a| steps_cm.map(|b| (a, b)))
+        .filter(|&(a, b)| (a, b) != (0.0, 0.0))
+        .collect();
+    let plants = [
+        ("drag x0.8", PlantMismatch::uniform(0.8, 1.0)),
+        (
+            "drag x1.2/x0.8",
+            PlantMismatch {
+                drag_scale: vec![1.2, 0.8],
+                gain_scale: vec![],
+            },
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (name, plant) in &plants {
+        let (mut received, mut rejected) = (0, 0);
+        for &t in &targets {
+            for seed in 1..=2 {
+                let o = one(&config, t, Sampling::Variable, seed, plant);
+                received += o.received;
+                rejected += o.rejected;
+            }
+        }
+        let percent = 100.0 * rejected as f64 / received as f64;
+        eprintln!("law alone, variable, {name}: rejected {rejected}/{received} true frames ({percent:.2} %)");
+        if rejected as f64 > 0.01 * received as f64 {
+            failures.push(format!(
+                "{name}: {rejected} of {received} true frames rejected"
+            ));
+        }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

@@ -26,16 +26,18 @@ pub(super) fn within_gate(filters: &[CapsuleFilter], z: &[f64], r_m2: f64) -> bo
 }
 
 /// As [`within_gate`], with each capsule's gate widened by its model drift
-/// `drift_m[i][0]` (m; see `Controller::accumulate_model_drift`): a bound
-/// on a coherent error, so it adds to the gate's radius, not its variance.
+/// `drift_m[i][0]` (m; see `Controller::accumulate_model_drift`), at most
+/// `max_drift_m`: a bound on a coherent error, so it adds to the gate's
+/// radius, not its variance.
 pub(super) fn within_widened_gate(
     filters: &[CapsuleFilter],
     z: &[f64],
     r_m2: f64,
     drift_m: &[[f64; 2]],
+    max_drift_m: f64,
 ) -> bool {
     filters.iter().zip(z).zip(drift_m).all(|((f, &zi), d)| {
-        let excess = (libm::fabs(zi - f.mean[0]) - d[0]).max(0.0);
+        let excess = (libm::fabs(zi - f.mean[0]) - d[0].min(max_drift_m)).max(0.0);
         excess * excess / (f.cov[0] + r_m2) <= MEASUREMENT_GATE_NIS
     })
 }

@@ -287,6 +287,11 @@ pub const STALL_LOOKAHEAD_S: f64 = 0.1;
 /// outliers in a row, with none of the frames between them accepted, are
 /// far likelier a wrong estimate than wrong data.
 pub const REACQUIRE_AFTER_REJECTIONS: usize = 5;
+/// Gated-out frames that agree with one another and whose run started
+/// within the model's drift bound (see `Controller::track_candidate`) are
+/// a capsule off the model: the estimate follows them at the third (or at
+/// `reacquire_after_rejections`, if fewer).
+pub const MODEL_ERROR_FOLLOW_FRAMES: usize = 3;
 /// Default `ControllerSettings::glitch_frames`: 0.8 s of tracking frames at
 /// the default constant sampling.
 pub const GLITCH_FRAMES: usize = 20;

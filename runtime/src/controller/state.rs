@@ -78,6 +78,11 @@ pub(super) struct Estimation<const NX: usize> {
     pub candidate: [CapsuleFilter; NX],
     /// Frames the candidate has absorbed (0: none).
     pub candidate_frames: usize,
+    /// Whether the candidate's first frame was within the estimate's gate
+    /// widened by the whole model drift: a capsule off the model, followed
+    /// after `MODEL_ERROR_FOLLOW_FRAMES` (else a glitch, see
+    /// `ControllerSettings::glitch_frames`).
+    pub candidate_continues_track: bool,
     /// The estimate the last re-acquisition replaced, predicted along (see
     /// `REPLACED_TRACK_MAX_STD_M`).
     pub replaced: [CapsuleFilter; NX],
@@ -111,6 +116,7 @@ impl<const NX: usize> Estimation<NX> {
             window: FactorWindow::new(),
             candidate: [CapsuleFilter::new(0.0, 0.0); NX],
             candidate_frames: 0,
+            candidate_continues_track: false,
             replaced: [CapsuleFilter::new(0.0, 0.0); NX],
             has_replaced: false,
             confirmed_frames: 0,

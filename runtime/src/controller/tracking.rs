@@ -213,10 +213,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 self.est.gated_rejections = self.est.gated_rejections.saturating_add(1);
                 self.track_candidate(z, r);
                 let after = self.settings.reacquire_after_rejections;
-                let needed = if self.est.confirmed_frames >= ESTABLISHED_AFTER_FRAMES {
-                    after.max(self.settings.glitch_frames.saturating_add(1))
-                } else {
+                let needed = if self.est.confirmed_frames < ESTABLISHED_AFTER_FRAMES {
                     after
+                } else if self.est.candidate_continues_track {
+                    after.min(MODEL_ERROR_FOLLOW_FRAMES)
+                } else {
+                    after.max(self.settings.glitch_frames.saturating_add(1))
                 };
                 if after != 0 && self.est.candidate_frames >= needed {
                     self.est.replaced = self.est.filters;
@@ -251,6 +253,17 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             update_filters(&mut self.est.candidate[..m], z, r);
             self.est.candidate_frames += 1;
         } else {
+            // A capsule off the model leaves the prediction smoothly: its
+            // first gated-out frame is still within what the model's
+            // uncertainty allows since the last accepted frame (the drift
+            // bound, uncapped). A glitch jumps beyond it.
+            self.est.candidate_continues_track = within_widened_gate(
+                &self.est.filters[..m],
+                z,
+                r,
+                &self.est.model_drift[..m],
+                f64::INFINITY,
+            );
             let std = self.settings.position_noise_m.max(1e-6);
             for (c, &p) in self.est.candidate.iter_mut().zip(z) {
                 *c = CapsuleFilter::with_speed_std(p, std, REACQUIRE_SPEED_STD_M_PER_S);
@@ -294,7 +307,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             let accel_err = gain_err * libm::fabs(S::capsule_gain(i) * u)
                 + drag_err * libm::fabs(S::capsule_drag(i, v));
             let d = &mut self.est.model_drift[i];
-            d[0] = (d[0] + d[1] * t + 0.5 * accel_err * t * t).min(MODEL_DRIFT_MAX_M);
+            // Not capped here: the gate caps it (`MODEL_DRIFT_MAX_M`), the
+            // continuity test of a run of gated-out frames does not.
+            d[0] += d[1] * t + 0.5 * accel_err * t * t;
             d[1] += accel_err * t;
         }
     }
@@ -443,6 +458,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             z,
             r,
             &self.est.model_drift[..NX / 2],
+            MODEL_DRIFT_MAX_M,
         ) {
             Measurement::Accepted
         } else {
