@@ -375,7 +375,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // Only the shots plan on the learned factors to advantage: the
         // refinement of the model's stored plans on them left more targets
         // unsettled (docs/decisions.md), so without shots the model stays.
-        if let (Some(u), true) = (played, self.shots_on()) {
+        let law_alone = self.settings.refine == Refine::None;
+        if let (Some(u), true) = (played, self.shots_on() || law_alone) {
             self.learn_from_full_state(x, u);
         }
         for i in 0..NX / 2 {
@@ -626,6 +627,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             (Refine::PerSample, Sampling::Ideal | Sampling::Constant) => 1,
         };
         let explicit = if S::HAS_EXPLICIT_TIER {
+            self.solver.set_explicit_similarity(rounds == 0);
             Some(self.solver.solve_explicit(e))
         } else {
             None

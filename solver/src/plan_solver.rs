@@ -100,6 +100,9 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// Whether a refined plan that does not settle within the horizon
     /// looks first for a shot from the stored plan tail (`Solver::set_tail_shots`).
     fn set_tail_shots(&mut self, on: bool);
+    /// Whether the explicit tier answers from the model state similar to
+    /// the capsules' (`Solver::set_explicit_similarity`).
+    fn set_explicit_similarity(&mut self, on: bool);
     /// Whether a start at rest at relative positions `e` is covered.
     fn covers_from_rest(e: &[f64; NX]) -> bool;
     /// The first leg from rest at displacement `d = x_start - x_target`
@@ -216,6 +219,9 @@ impl<
     }
     fn set_tail_shots(&mut self, on: bool) {
         Solver::set_tail_shots(self, on)
+    }
+    fn set_explicit_similarity(&mut self, on: bool) {
+        Solver::set_explicit_similarity(self, on)
     }
     fn adopt_explicit(&mut self) {
         Solver::adopt_explicit(self)

@@ -75,6 +75,9 @@ pub struct Solver<S, const M: usize, const NX: usize, const N: usize, const K: u
     shot_samples: usize,
     /// Whether `solve` shoots.
     shooting: bool,
+    /// Whether the explicit tier answers from the model state similar to
+    /// the capsules' (see `similar_model_state`).
+    explicit_similar: bool,
     /// Whether a refined plan that does not settle within the horizon
     /// looks first for a shot from the stored plan tail, as long as the
     /// tail takes to settle (see `acquire_shot`).
@@ -139,6 +142,7 @@ impl<
             shooter: Shooter::new(),
             shot_samples: 0,
             shooting: false,
+            explicit_similar: false,
             tail_shots: false,
             spec: PhantomData,
         }
@@ -146,7 +150,8 @@ impl<
 
     /// Rolls plans out on the model with each capsule's gain and drag
     /// scaled by `scales[i]` (the runtime's estimate of the real capsules;
-    /// stored plans and the explicit tier stay the model's).
+    /// stored plans stay the model's, and the explicit tier too unless
+    /// `set_explicit_similarity`).
     pub fn set_model_scales(&mut self, scales: &ModelScales<M>) {
         self.scales = *scales;
     }
@@ -202,6 +207,12 @@ impl<
             tier: Tier::Explicit,
         };
         let coasted = self.schedule.coasted();
+        let (e, input_scale) = if self.explicit_similar {
+            similar_model_state(e, &self.scales)
+        } else {
+            (*e, 1.0)
+        };
+        let e = &e;
         // The stored plans keep every position error within the state
         // bound; beyond it no sample's linearization holds (followed out
         // there, a capsule went 150 mm off): out of range, the fallback.
@@ -228,6 +239,9 @@ impl<
         };
         match found {
             Some(out) => {
+                for u in self.explicit_plan.iter_mut() {
+                    *u = clamp_u(*u * input_scale, S::U_MAX_T_PER_M);
+                }
                 self.explicit_ready = true;
                 self.explicit_slot = out.slot;
                 self.explicit_active = self.qp.active;
@@ -288,6 +302,16 @@ impl<
     /// `SHOT_UNSETTLED_SAMPLES` from the refined plan).
     pub fn set_tail_shots(&mut self, on: bool) {
         self.tail_shots = on;
+    }
+
+    /// Whether the explicit tier answers capsules off the model (the
+    /// factors of `set_model_scales`) from the model state similar to
+    /// theirs, its gradient rescaled; off: the model's answer for their
+    /// state. For the law alone: under the refinement, which rolls out
+    /// on the factors, it let a glitch's biased factors hold a capsule
+    /// 0.5 mm off (docs/decisions.md).
+    pub fn set_explicit_similarity(&mut self, on: bool) {
+        self.explicit_similar = on;
     }
 
     /// Whether `solve` looks for minimum-time shots; off drops the shot.
@@ -648,4 +672,29 @@ impl<
             a += 1;
         }
     }
+}
+
+/// The model's state whose stored answer, its gradient scaled by the
+/// returned factor, is the answer for capsules whose gain and drag are
+/// `scales[i]` times the model's. A capsule `x'' = s_g g u - s_b b x'|x'|`
+/// follows `x / s_b` of the model's trajectory under `u / (s_g s_b)`: its
+/// error and speed times `s_b` are the model's, and the gradient is
+/// divided by `s_g s_b`. The capsules share the gradient: it is divided by
+/// the geometric mean `p` of their products `s_g s_b`, and each capsule's
+/// error and speed are scaled by `p / s_g`, so that every capsule's gain is
+/// the model's and only the spread of the products is left, as drag
+/// (exact when the products agree). Identity on the model.
+fn similar_model_state<const NX: usize, const M: usize>(
+    e: &[f64; NX],
+    scales: &ModelScales<M>,
+) -> ([f64; NX], f64) {
+    let m = NX / 2;
+    let product: f64 = scales.iter().take(m).map(|s| s[0] * s[1]).product();
+    let mean_product = libm::pow(product, 1.0 / m as f64);
+    let mut model = *e;
+    for (i, s) in scales.iter().enumerate().take(m) {
+        model[2 * i] *= mean_product / s[0];
+        model[2 * i + 1] *= mean_product / s[0];
+    }
+    (model, 1.0 / mean_product)
 }

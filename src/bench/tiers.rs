@@ -39,7 +39,20 @@ type Start = (Solver, [f64; NX]);
 /// The state after one explicit sample from `e`, and the solver that
 /// played it (its last slot set as in the closed loop); None out of range.
 fn after_one_explicit_sample(e: &[f64; NX]) -> Option<Start> {
+    after_one_explicit_sample_on(e, &[[1.0, 1.0]; NX / 2], false)
+}
+
+/// As `after_one_explicit_sample`, with the solver told the capsules'
+/// gain and drag factors `scales` and answering from the similar model
+/// state when `similar` (the law alone's step off the model).
+fn after_one_explicit_sample_on(
+    e: &[f64; NX],
+    scales: &[[f64; 2]; NX / 2],
+    similar: bool,
+) -> Option<Start> {
     let mut s = Solver::new();
+    PlanSolver::set_model_scales(&mut s, scales);
+    s.set_explicit_similarity(similar);
     if s.solve_explicit(e).status == SolveStatus::OutOfRange {
         return None;
     }
@@ -87,8 +100,24 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> std::io::Resul
             in_loop_ns[i] = in_loop_ns[i].min(t);
         }
     }
+    // The law alone's step on capsules off the model (gain x0.9, drag
+    // x1.2 learned): the similar state and the rescaled plan on top.
+    let mut similar_ns = vec![u64::MAX; starts.len()];
+    for _ in 0..REPEATS {
+        for (i, e) in origins.iter().enumerate() {
+            let Some((mut solver, e1)) =
+                after_one_explicit_sample_on(e, &[[0.9, 1.2]; NX / 2], true)
+            else {
+                continue;
+            };
+            let (_, t) = timed(|| black_box(&mut solver).solve_explicit(black_box(&e1)));
+            similar_ns[i] = similar_ns[i].min(t);
+        }
+    }
+    let similar_ns: Vec<u64> = similar_ns.into_iter().filter(|&t| t != u64::MAX).collect();
     let ex = Percentiles::of(&explicit_ns);
     let in_loop = Percentiles::of(&in_loop_ns);
+    let similar = Percentiles::of(&similar_ns);
     let re = Percentiles::of(&refined_ns);
     let max_iterations = iterations.iter().copied().max().unwrap_or(0);
     let mut histogram = std::collections::BTreeMap::<u32, u64>::new();
@@ -108,6 +137,7 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> std::io::Resul
     for (name, p) in [
         ("explicit (cold: one sweep over all states)", ex),
         ("explicit in the loop (after the step before)", in_loop),
+        ("the same off the model (similar state)", similar),
         ("refined", re),
     ] {
         crate::out!(
@@ -134,6 +164,11 @@ pub fn measure_tiers(states: &[BenchState], peer_count: usize) -> std::io::Resul
         "explicit_in_loop": {
             "median_ns": in_loop.median, "p99_ns": in_loop.p99, "max_ns": in_loop.max,
             "what": "Solver::solve_explicit from the state one explicit sample later, timed right after the untimed step before it (its data in cache, as in the closed loop)",
+        },
+        "explicit_in_loop_similar": {
+            "median_ns": similar.median, "p99_ns": similar.p99, "max_ns": similar.max,
+            "states": similar_ns.len(),
+            "what": "as explicit_in_loop, the law alone told gain x0.9 and drag x1.2: the similar model state's step and the rescaled plan",
         },
         "refined": {
             "median_ns": re.median, "p99_ns": re.p99, "max_ns": re.max,
