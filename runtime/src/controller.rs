@@ -597,7 +597,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 self.solver.plan(),
                 IDLE_GRADIENT_FRACTION * S::U_MAX_T_PER_M,
             );
-            if end > n && end <= n_max {
+            let arriving_off_model = (0..NX / 2).all(|i| libm::fabs(e[2 * i]) < ARRIVAL_REGION_M)
+                && self.factors_differ_from_told()
+                && self.learned_products_agree();
+            if end > n && end <= n_max && !arriving_off_model {
                 return end;
             }
         }

@@ -177,6 +177,13 @@ impl ControllerSettings {
 /// remove (docs/decisions.md).
 pub const ARRIVAL_REGION_M: f64 = 20e-3;
 
+/// The law alone under variable sampling plays a plan that ends within
+/// the phase to its end, except near the target on capsules off the model
+/// whose learned gain-drag products agree within this fraction: there the
+/// similar model state is nearly exact and the switching rule's shorter
+/// phases land closer (docs/decisions.md).
+pub const SIMILAR_PRODUCT_AGREEMENT: f64 = 0.1;
+
 /// From this many capsules the minimum-time shots carry the moves under
 /// the scanner cycle: the refinement of their stored plans (1 cm apart,
 /// from rest, no explicit tier) is a poor fallback from a moving state
