@@ -582,10 +582,13 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     /// Samples to play before the next tracking phase (the switching rule;
     /// 1 when the host allows no more). The law alone under variable
-    /// sampling plays a plan that ends within the phase to its end: its
-    /// stored plans were solved back to back, and a coast inside the final
-    /// manoeuvre misses the target (the refinement re-solves the plan for
-    /// the phase instead, `replan_for_phase`).
+    /// sampling has stored plans for two schedules only: while the learned
+    /// gain-drag products agree (`SIMILAR_PRODUCT_AGREEMENT`; always on the
+    /// model) it plays one sample per phase on the coasted plans, as
+    /// constant sampling does; otherwise the back-to-back plans in the
+    /// rule's phases, a plan that ends within the phase to its end (a coast
+    /// inside the final manoeuvre misses the target). The refinement
+    /// re-solves the plan for the phase instead (`replan_for_phase`).
     fn phase_length(&self, e: &[f64; NX], n_max: usize) -> usize {
         if n_max <= 1 {
             return 1;
@@ -593,14 +596,14 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let n_max = n_max.min(S::N);
         let n = self.actuation_length(e, n_max);
         if self.settings.refine == Refine::None && self.settings.sampling == Sampling::Variable {
+            if self.learned_products_agree() {
+                return 1;
+            }
             let end = acting_samples(
                 self.solver.plan(),
                 IDLE_GRADIENT_FRACTION * S::U_MAX_T_PER_M,
             );
-            let arriving_off_model = (0..NX / 2).all(|i| libm::fabs(e[2 * i]) < ARRIVAL_REGION_M)
-                && self.factors_differ_from_told()
-                && self.learned_products_agree();
-            if end > n && end <= n_max && !arriving_off_model {
+            if end > n && end <= n_max {
                 return end;
             }
         }

@@ -177,11 +177,12 @@ impl ControllerSettings {
 /// remove (docs/decisions.md).
 pub const ARRIVAL_REGION_M: f64 = 20e-3;
 
-/// The law alone under variable sampling plays a plan that ends within
-/// the phase to its end, except near the target on capsules off the model
-/// whose learned gain-drag products agree within this fraction: there the
-/// similar model state is nearly exact and the switching rule's shorter
-/// phases land closer (docs/decisions.md).
+/// The law alone under variable sampling plays one sample per phase on
+/// the coasted plans while the capsules' learned gain-drag products agree
+/// within this fraction (the similar model state is then nearly exact),
+/// and the back-to-back plans in the rule's phases once they do not: on
+/// the coasted plans a drag split (x1.2, x0.8) left 84 of 192 mismatch
+/// runs unsettled, on the back-to-back ones 4 (docs/decisions.md).
 pub const SIMILAR_PRODUCT_AGREEMENT: f64 = 0.1;
 
 /// From this many capsules the minimum-time shots carry the moves under
