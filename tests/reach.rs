@@ -179,22 +179,30 @@ fn scanner_points(config: &Config, sampling: Sampling, seed: u64) -> Vec<ReachPo
 }
 
 /// The explicit law alone under variable sampling, the same grid and seeds
-/// 1-8: every run settles. Measured: 640 of 640 (median 2.04 x the ideal
-/// minimum time); 594 while coasts cut into the final manoeuvres of its
-/// back-to-back plans.
+/// 1-8: every run settles, and the median settle is within issue 26's
+/// floor for the law alone, 1.5 x the ideal minimum time + 15 %. Measured:
+/// 640 of 640, median 1.55 (one sample per phase on the coasted plans
+/// while the learned products agree); 2.05 with the back-to-back plans in
+/// the rule's phases, and 594 settled while coasts cut into their final
+/// manoeuvres.
 #[test]
 fn the_explicit_law_alone_settles_every_variable_scanner_run() {
     let mut config = Config::embedded_default();
     config.controller.refine = RefineMode::None;
     let mut unsettled = Vec::new();
+    let mut ratios = Vec::new();
     for seed in 1..=8 {
         for p in scanner_points(&config, Sampling::Variable, seed) {
-            if p.settle_time_s.is_none() {
-                unsettled.push((seed, cm(&p.target_m)));
+            match p.settle_over_bound {
+                Some(r) => ratios.push(r),
+                None => unsettled.push((seed, cm(&p.target_m))),
             }
         }
     }
     assert!(unsettled.is_empty(), "unsettled: {unsettled:?}");
+    ratios.sort_by(f64::total_cmp);
+    let median = ratios[ratios.len() / 2];
+    assert!(median <= 1.5 * 1.15, "median {median} of the ideal bound");
 }
 
 /// Off the table lattice, from a start that is not the origin, over the
