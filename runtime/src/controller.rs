@@ -16,6 +16,7 @@ mod braking;
 mod checks;
 mod fusion;
 mod hold;
+mod law_alone;
 mod legs;
 mod mode;
 mod numeric;
@@ -372,11 +373,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             let kept = self.estimate();
             return Ok(self.plan_from(&kept, RuntimeStatus::MeasurementRejected, 1));
         }
-        // Only the shots plan on the learned factors to advantage: the
-        // refinement of the model's stored plans on them left more targets
-        // unsettled (docs/decisions.md), so without shots the model stays.
-        let law_alone = self.settings.refine == Refine::None;
-        if let (Some(u), true) = (played, self.shots_on() || law_alone) {
+        // Only the shots and the law alone's similar state use the learned
+        // factors to advantage: the refinement of the stored plans on them
+        // left more targets unsettled (docs/decisions.md).
+        let explicit_only = self.settings.refine == Refine::None;
+        if let (Some(u), true) = (played, self.shots_on() || explicit_only) {
             self.learn_from_full_state(x, u);
         }
         for i in 0..NX / 2 {
@@ -582,13 +583,12 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
 
     /// Samples to play before the next tracking phase (the switching rule;
     /// 1 when the host allows no more). The law alone under variable
-    /// sampling has stored plans for two schedules only: while the learned
-    /// gain-drag products agree (`SIMILAR_PRODUCT_AGREEMENT`; always on the
-    /// model) it plays one sample per phase on the coasted plans, as
-    /// constant sampling does; otherwise the back-to-back plans in the
-    /// rule's phases, a plan that ends within the phase to its end (a coast
-    /// inside the final manoeuvre misses the target). The refinement
-    /// re-solves the plan for the phase instead (`replan_for_phase`).
+    /// sampling has plans for two schedules only: while the learned
+    /// products agree (`SIMILAR_PRODUCT_AGREEMENT`; always on the model)
+    /// one sample per phase on the coasted plans, as constant sampling;
+    /// else the back-to-back plans in the rule's phases, a plan that ends
+    /// within the phase to its end (a coast in the final manoeuvre misses;
+    /// the refinement re-solves for the phase instead, `replan_for_phase`).
     fn phase_length(&self, e: &[f64; NX], n_max: usize) -> usize {
         if n_max <= 1 {
             return 1;
@@ -632,6 +632,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             (Refine::PerSample, Sampling::Variable) => self.law.planned_phase_samples.max(1),
             (Refine::PerSample, Sampling::Ideal | Sampling::Constant) => 1,
         };
+        if let Some(kept) = self.plan_kept_to_its_end() {
+            return kept;
+        }
         let explicit = if S::HAS_EXPLICIT_TIER {
             self.solver.set_explicit_similarity(rounds == 0);
             Some(self.solver.solve_explicit(e))

@@ -206,13 +206,16 @@ fn the_law_alone_follows_capsules_off_the_model_instead_of_rejecting_them() {
 /// of gain-drag products, the gradient by its inverse (`solver::refine`).
 /// Without it a drag x1.2 plant left 63 of 192 constant-sampling runs of
 /// the mismatch grid unsettled (median 4.18 s) and gain x0.9 9 (2.33 s).
-/// Near the target under variable sampling, once the learned products
-/// agree, it takes the switching rule's shorter phases
-/// (`SIMILAR_PRODUCT_AGREEMENT`). Asserted over the 24-target grid (+-4
-/// cm, 2 cm steps), seeds 1-2, the paper's disturbance: constant sampling
-/// at most one run of 48 unsettled per plant and the median within 1.3 x
-/// the nominal plant's (measured 1.02-1.22 x); variable sampling at most
-/// two and 2.0 x (measured 1.50-1.96 x; issue 26 asks 1.3 x: not met).
+/// While the learned products agree, variable sampling plays one sample
+/// per phase on the coasted plans (with the back-to-back plans the
+/// medians were 2.20 x the nominal); once they differ (the drag split:
+/// no state is similar) each plan is played to its end (re-solved every
+/// cycle, the split left 84 of 192 constant-sampling runs unsettled).
+/// Asserted over the 24-target grid (+-4 cm, 2 cm steps), seeds 1-2, the
+/// paper's disturbance: on each plant at most one run of 48 unsettled;
+/// the median within 1.3 x the nominal plant's under constant sampling
+/// and 1.5 x under variable (measured 1.02-1.22 x and 1.06-1.43 x; issue
+/// 26 asks 1.3 x), the split's within 2.0 x (measured 1.66 x and 1.86 x).
 #[test]
 fn the_law_alone_answers_capsules_off_the_model_with_a_similar_state() {
     let mut config = Config::embedded_default();
@@ -229,10 +232,17 @@ fn the_law_alone_answers_capsules_off_the_model_with_a_similar_state() {
         ("drag x1.2", PlantMismatch::uniform(1.2, 1.0)),
         ("gain x0.9", PlantMismatch::uniform(1.0, 0.9)),
         ("gain x1.1", PlantMismatch::uniform(1.0, 1.1)),
+        (
+            "drag x1.2/x0.8",
+            PlantMismatch {
+                drag_scale: vec![1.2, 0.8],
+                gain_scale: vec![],
+            },
+        ),
     ];
     let mut failures = Vec::new();
     for (sampling, median_ratio, max_unsettled) in
-        [(Sampling::Constant, 1.3, 1), (Sampling::Variable, 2.0, 2)]
+        [(Sampling::Constant, 1.3, 1), (Sampling::Variable, 1.5, 1)]
     {
         let mut nominal_median_s = f64::NAN;
         for (name, plant) in &plants {
@@ -253,7 +263,7 @@ fn the_law_alone_answers_capsules_off_the_model_with_a_similar_state() {
             );
             if *name == "nominal" {
                 nominal_median_s = med;
-            } else if med > median_ratio * nominal_median_s {
+            } else if med > plant_ratio(name, median_ratio) * nominal_median_s {
                 failures.push(format!(
                     "{sampling:?} {name}: median {med} s against the nominal {nominal_median_s} s"
                 ));
@@ -266,4 +276,14 @@ fn the_law_alone_answers_capsules_off_the_model_with_a_similar_state() {
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The median bound of plant `name` against the nominal plant's: `ratio`,
+/// 2.0 for the drag split, whose products no similar state makes agree.
+fn plant_ratio(name: &str, ratio: f64) -> f64 {
+    if name.contains('/') {
+        2.0
+    } else {
+        ratio
+    }
 }

@@ -177,12 +177,13 @@ impl ControllerSettings {
 /// remove (docs/decisions.md).
 pub const ARRIVAL_REGION_M: f64 = 20e-3;
 
-/// The law alone under variable sampling plays one sample per phase on
-/// the coasted plans while the capsules' learned gain-drag products agree
-/// within this fraction (the similar model state is then nearly exact),
-/// and the back-to-back plans in the rule's phases once they do not: on
-/// the coasted plans a drag split (x1.2, x0.8) left 84 of 192 mismatch
-/// runs unsettled, on the back-to-back ones 4 (docs/decisions.md).
+/// The capsules' learned gain-drag products agree within this fraction:
+/// the law alone's similar model state is then nearly exact. While they
+/// do, the law alone under variable sampling plays one sample per phase
+/// on the coasted plans; once they differ, the back-to-back plans in the
+/// rule's phases, and under every sampling each plan to its end (re-solved
+/// every cycle, a drag split (x1.2, x0.8) left 84 of 192 constant-sampling
+/// mismatch runs unsettled: docs/decisions.md).
 pub const SIMILAR_PRODUCT_AGREEMENT: f64 = 0.1;
 
 /// From this many capsules the minimum-time shots carry the moves under

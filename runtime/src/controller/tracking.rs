@@ -410,22 +410,6 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.refresh_applied_scales();
     }
 
-    /// Whether the capsules' learned gain-drag products agree within
-    /// `SIMILAR_PRODUCT_AGREEMENT`: the law alone's similar model state
-    /// is then nearly exact (`Solver::set_explicit_similarity`).
-    pub(super) fn learned_products_agree(&self) -> bool {
-        let products = self
-            .est
-            .applied_scales
-            .iter()
-            .take(NX / 2)
-            .map(|f| f[0] * f[1]);
-        let (lo, hi) = products.fold((f64::INFINITY, 0.0_f64), |(lo, hi), p| {
-            (lo.min(p), hi.max(p))
-        });
-        hi <= lo * (1.0 + SIMILAR_PRODUCT_AGREEMENT)
-    }
-
     /// Takes up the factors that differ significantly from the model
     /// (`SCALE_SIGNIFICANCE` standard deviations): the estimate is moved
     /// by what the change of factors implies, and the refinement rolls
