@@ -596,7 +596,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         let n_max = n_max.min(S::N);
         let n = self.actuation_length(e, n_max);
         if self.settings.refine == Refine::None && self.settings.sampling == Sampling::Variable {
-            if self.learned_products_agree() {
+            if self.plays_coasted_plans() {
                 return 1;
             }
             let end = acting_samples(

@@ -485,10 +485,10 @@ pub const fn explicit_step_ops(n: usize, nx: usize, k: usize, qp_iterations: usi
         collect + factor + newton_rhs + substitutions + ratio + update + multipliers + n;
     // Plan assembly (window clamp, tail copy) and the predicted cost.
     let finish = 3 * n + k + (nx * nx * 2 + nx * 2 + 2 * n * nx + n * n * 2 + 2 * n + 4);
-    // The law alone's similar model state (`refine::similar_model_state`):
-    // per capsule the gain-drag product, its share of the geometric mean
-    // and two scalings; the mean's root (one `pow`) and inverse; each of
-    // the plan's K inputs scaled and clamped.
-    let similarity = 5 * (nx / 2) + 2 + 3 * k;
+    // The law alone's similar model state (`refine::Similarity`, its
+    // factors computed when the learned factors change): each capsule's
+    // error and speed scaled; each of the plan's K inputs scaled and
+    // clamped.
+    let similarity = nx + 3 * k;
     lookup + candidates + setup + qp_iterations as u64 * per_iteration + finish + similarity
 }

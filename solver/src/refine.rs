@@ -76,8 +76,10 @@ pub struct Solver<S, const M: usize, const NX: usize, const N: usize, const K: u
     /// Whether `solve` shoots.
     shooting: bool,
     /// Whether the explicit tier answers from the model state similar to
-    /// the capsules' (see `similar_model_state`).
+    /// the capsules' (see `Similarity`).
     explicit_similar: bool,
+    /// The similarity for `scales`, computed when they change.
+    similarity: Similarity<M>,
     /// Whether a refined plan that does not settle within the horizon
     /// looks first for a shot from the stored plan tail, as long as the
     /// tail takes to settle (see `acquire_shot`).
@@ -143,6 +145,7 @@ impl<
             shot_samples: 0,
             shooting: false,
             explicit_similar: false,
+            similarity: Similarity::IDENTITY,
             tail_shots: false,
             spec: PhantomData,
         }
@@ -154,6 +157,7 @@ impl<
     /// `set_explicit_similarity`).
     pub fn set_model_scales(&mut self, scales: &ModelScales<M>) {
         self.scales = *scales;
+        self.similarity = Similarity::of(scales);
     }
 
     /// The refinement's QP engine.
@@ -208,7 +212,7 @@ impl<
         };
         let coasted = self.schedule.coasted();
         let (e, input_scale) = if self.explicit_similar {
-            similar_model_state(e, &self.scales)
+            self.similarity.model_state(e)
         } else {
             (*e, 1.0)
         };
@@ -674,27 +678,48 @@ impl<
     }
 }
 
-/// The model's state whose stored answer, its gradient scaled by the
-/// returned factor, is the answer for capsules whose gain and drag are
+/// The model's states similar to capsules whose gain and drag are
 /// `scales[i]` times the model's. A capsule `x'' = s_g g u - s_b b x'|x'|`
-/// follows `x / s_b` of the model's trajectory under `u / (s_g s_b)`: its
-/// error and speed times `s_b` are the model's, and the gradient is
-/// divided by `s_g s_b`. The capsules share the gradient: it is divided by
-/// the geometric mean `p` of their products `s_g s_b`, and each capsule's
-/// error and speed are scaled by `p / s_g`, so that every capsule's gain is
-/// the model's and only the spread of the products is left, as drag
-/// (exact when the products agree). Identity on the model.
-fn similar_model_state<const NX: usize, const M: usize>(
-    e: &[f64; NX],
-    scales: &ModelScales<M>,
-) -> ([f64; NX], f64) {
-    let m = NX / 2;
-    let product: f64 = scales.iter().take(m).map(|s| s[0] * s[1]).product();
-    let mean_product = libm::pow(product, 1.0 / m as f64);
-    let mut model = *e;
-    for (i, s) in scales.iter().enumerate().take(m) {
-        model[2 * i] *= mean_product / s[0];
-        model[2 * i + 1] *= mean_product / s[0];
+/// at `x` moves as the model's capsule at `s_b x` under `s_g s_b u`. The
+/// capsules share the gradient: it is divided by the geometric mean `p`
+/// of their products `s_g s_b`, and each capsule's error and speed are
+/// scaled by `p / s_g`, so that every capsule's gain is the model's and
+/// only the spread of the products is left, as drag (exact when the
+/// products agree). The identity on the model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Similarity<const M: usize> {
+    /// Per capsule, the factor on its error and speed.
+    state_scale: [f64; M],
+    /// The factor on the model's answer, the gradient.
+    input_scale: f64,
+}
+
+impl<const M: usize> Similarity<M> {
+    const IDENTITY: Self = Similarity {
+        state_scale: [1.0; M],
+        input_scale: 1.0,
+    };
+
+    fn of(scales: &ModelScales<M>) -> Self {
+        let product: f64 = scales.iter().map(|s| s[0] * s[1]).product();
+        let mean_product = libm::pow(product, 1.0 / M as f64);
+        let mut state_scale = [1.0; M];
+        for (k, s) in state_scale.iter_mut().zip(scales) {
+            *k = mean_product / s[0];
+        }
+        Similarity {
+            state_scale,
+            input_scale: 1.0 / mean_product,
+        }
     }
-    (model, 1.0 / mean_product)
+
+    /// The model's state similar to `e`, and the factor on its answer.
+    fn model_state<const NX: usize>(&self, e: &[f64; NX]) -> ([f64; NX], f64) {
+        let mut model = *e;
+        for (i, k) in self.state_scale.iter().enumerate() {
+            model[2 * i] *= k;
+            model[2 * i + 1] *= k;
+        }
+        (model, self.input_scale)
+    }
 }

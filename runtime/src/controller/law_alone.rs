@@ -35,6 +35,17 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         })
     }
 
+    /// Whether the law alone under variable sampling plays one sample per
+    /// phase on the coasted plans: while the learned products agree and
+    /// the gap is the one those plans were solved for (with 10 ms more,
+    /// 15-19 of 64 off-model runs of an off-lattice grid did not settle,
+    /// against 0-1 with the back-to-back plans in the rule's phases).
+    pub(super) fn plays_coasted_plans(&self) -> bool {
+        let tables_gap_s = S::TRACKING_TIME_S + S::EXTRA_DELAY_S;
+        libm::fabs(self.est.gap_s - tables_gap_s) <= COASTED_GAP_TOLERANCE_S
+            && self.learned_products_agree()
+    }
+
     /// The law alone on capsules whose products differ, with a plan still
     /// acting: the report of keeping it (no solve). None: solve.
     pub(super) fn plan_kept_to_its_end(&self) -> Option<SolveReport> {

@@ -186,6 +186,11 @@ pub const ARRIVAL_REGION_M: f64 = 20e-3;
 /// mismatch runs unsettled: docs/decisions.md).
 pub const SIMILAR_PRODUCT_AGREEMENT: f64 = 0.1;
 
+/// How far the estimated gap may be from the one the coasted plans were
+/// solved for (tracking time + extra delay) for the law alone under
+/// variable sampling to play them one sample per phase, s.
+pub const COASTED_GAP_TOLERANCE_S: f64 = 1.0e-3;
+
 /// From this many capsules the minimum-time shots carry the moves under
 /// the scanner cycle: the refinement of their stored plans (1 cm apart,
 /// from rest, no explicit tier) is a poor fallback from a moving state
