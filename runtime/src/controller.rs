@@ -16,6 +16,7 @@ mod braking;
 mod checks;
 mod fusion;
 mod hold;
+mod hold_frames;
 mod law_alone;
 mod legs;
 mod mode;
@@ -32,6 +33,7 @@ pub use braking::braking_gradient;
 use braking::*;
 pub use checks::check_workspace;
 use checks::*;
+use hold_frames::HoldFrames;
 use numeric::*;
 pub use settings::*;
 pub use state::Mode;
@@ -100,6 +102,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 planned_phase_samples: settings.max_actuation_samples,
                 mean_gain: mean_gradient_gain::<S, NX, K>(),
                 station: StationKeeper::new(&capsule_drags::<S, NX, K>()),
+                hold_frames: HoldFrames::new(),
             },
         };
         // What the hold can stop after a shot depends on the sampling
@@ -341,6 +344,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.sup.has_target = true;
         self.sup.recovering = false;
         self.sup.off_model_confirm_exits = 0;
+        self.sup.drift_exits = 0;
         self.apply_leg(&x, &leg);
         self.restart_factor_window();
         self.restart_plan();

@@ -89,8 +89,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && self.centre_stops_near(e)
                 && can_stop(HOLD_STOP_SPREAD_M, rate_std)
         };
+        let holding = holding && !(was && self.hold_drifts_out());
         if !was && holding {
             self.law.station.start();
+            self.law.hold_frames.clear();
             // The end game's progress restarts when the hold ends.
             self.forget_stall();
         }
@@ -207,5 +209,64 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             Sampling::Ideal => 0.0,
             Sampling::Constant | Sampling::Variable => self.est.gap_s,
         }
+    }
+
+    /// Logs accepted frame `z` (absolute positions, m) while holding.
+    pub(super) fn log_hold_frame(&mut self, z: &[f64]) {
+        let mut p = [0.0; NX];
+        for (i, pi) in p.iter_mut().enumerate().take(NX / 2) {
+            *pi = z[i] - self.sup.target[2 * i];
+        }
+        let xi = self.law.station.along_direction(&p[..NX / 2]);
+        let t_s = self.law.station.held_s();
+        self.law.hold_frames.push(t_s, xi);
+    }
+
+    /// Whether the hold is left for the relative drift its frames show:
+    /// judged once per hold, after `HOLD_DRIFT_FIT_S` in it, at most
+    /// `HOLD_DRIFT_EXITS` times per target, for two capsules under the
+    /// scanner cycle (ideal sampling knows the state; three capsules' third
+    /// combination is not the drag direction's), once the learned factors
+    /// differ from the told ones (on the model arrivals keep less relative
+    /// speed, and a constant bias's drift, which a manoeuvre does not
+    /// remove, set off the exit) and while the learned gains agree (else
+    /// the centre law itself moves the capsules apart or together, which
+    /// the stopping test does not count). Left when no rate within
+    /// `HOLD_DRIFT_RATE_SIGMAS` of the line's stops the capsules within
+    /// `HOLD_DRIFT_SPREAD_M`.
+    pub(super) fn hold_drifts_out(&mut self) -> bool {
+        if self.settings.sampling == Sampling::Ideal
+            || NX / 2 > HOLD_EARLY_EXIT_MAX_CAPSULES
+            || self.sup.drift_exits >= HOLD_DRIFT_EXITS
+            || self.law.hold_frames.judged
+            || self.law.station.held_s() < HOLD_DRIFT_FIT_S
+            || !self.factors_differ_from_told()
+            || !self.learned_gains_agree()
+        {
+            return false;
+        }
+        self.law.hold_frames.judged = true;
+        let station = &self.law.station;
+        let xi_std = self.settings.position_noise_m * station.direction_norm();
+        let Some(line) = self.law.hold_frames.line(xi_std) else {
+            return false;
+        };
+        // The learned factors' authority, above the model's too (the entry
+        // test caps it there): leaving a hold that would have settled costs
+        // more than a second of drift.
+        let authority = station.drag_authority(&self.est.applied_scales);
+        let stops = station.motion_stops_within(
+            line.coordinate,
+            line.rate,
+            S::DT_S,
+            self.hold_gap_s(),
+            HOLD_DRIFT_SPREAD_M,
+            authority,
+            HOLD_DRIFT_RATE_SIGMAS * line.rate_std,
+        );
+        if !stops {
+            self.sup.drift_exits += 1;
+        }
+        !stops
     }
 }

@@ -270,6 +270,23 @@ pub const HOLD_CONFIRM_OFF_MODEL_EXITS: u32 = 2;
 /// apart or together, the stopping test misjudges the motion, and the
 /// tighter confirm left hold after hold (docs/decisions.md).
 pub const HOLD_CONFIRM_GAIN_AGREEMENT: f64 = 0.05;
+/// Frames of hold through which the relative drift's line is fitted
+/// before the hold may be left for it, s (see `hold_frames`): the rate to
+/// about 0.3 mm/s on 0.2 mm frames 40 ms apart. Judged once per hold:
+/// judged every cycle from 0.8 s to 2 s, the many looks found a 3-sigma
+/// line in holds that settled (docs/decisions.md).
+pub const HOLD_DRIFT_FIT_S: f64 = 0.8;
+/// How far apart the capsules may stop for the hold to go on once the
+/// frames tell the drift, m: inside the band's 2 mm with room for the
+/// disturbance.
+pub const HOLD_DRIFT_SPREAD_M: f64 = 2.0e-3;
+/// Standard deviations of the drift line's rate within which some rate
+/// must stop inside for the hold to go on.
+pub const HOLD_DRIFT_RATE_SIGMAS: f64 = 2.0;
+/// Holds left for the frames' drift per target.
+pub const HOLD_DRIFT_EXITS: u32 = 1;
+/// Fewest frames a drift line is fitted through.
+pub const HOLD_DRIFT_MIN_FRAMES: usize = 8;
 /// The hold's entry test gives the estimated relative rate this many of
 /// its standard deviations (see `Controller::update_hold`).
 pub const HOLD_ENTRY_RATE_SIGMAS: f64 = 1.0;

@@ -3,6 +3,7 @@
 //! the law carries from one cycle to the next (`LawMemory`). The mode
 //! enum lives here too; its transitions are in `mode`.
 
+use super::hold_frames::HoldFrames;
 use super::StationKeeper;
 use crate::estimator::{CapsuleFilter, ScaleEstimate};
 use crate::factor_fit::FactorWindow;
@@ -152,6 +153,9 @@ pub(super) struct Supervision<const NX: usize> {
     /// Settling holds left at the off-model confirm spread since the
     /// target was set (see `Controller::hold_confirm_spread_m`).
     pub off_model_confirm_exits: u32,
+    /// Holds left for the frames' relative drift since the target was set
+    /// (see `Controller::hold_drifts_out`).
+    pub drift_exits: u32,
 }
 
 impl<const NX: usize> Supervision<NX> {
@@ -166,6 +170,7 @@ impl<const NX: usize> Supervision<NX> {
             stall_best_m: f64::INFINITY,
             stall_clock_s: 0.0,
             off_model_confirm_exits: 0,
+            drift_exits: 0,
         }
     }
 
@@ -194,4 +199,6 @@ pub(super) struct LawMemory<const NX: usize> {
     pub mean_gain: f64,
     /// The hold's relative-position law (see `station`).
     pub station: StationKeeper<NX>,
+    /// The hold's frames along the drag direction (see `hold_frames`).
+    pub hold_frames: HoldFrames,
 }

@@ -126,10 +126,30 @@ impl<const NX: usize> StationKeeper<NX> {
         authority: f64,
         rate_std: f64,
     ) -> bool {
-        let (mut xi, mut rate, mut reach) = (0.0, 0.0, 0.0);
+        let (mut xi, mut rate) = (0.0, 0.0);
         for i in 0..NX / 2 {
             xi += self.direction[i] * e[2 * i];
             rate += self.direction[i] * e[2 * i + 1];
+        }
+        self.motion_stops_within(xi, rate, dt_s, gap_s, spread_m, authority, rate_std)
+    }
+
+    /// As [`Self::can_stop`], for the relative motion along the drag
+    /// direction given directly: position `xi` and rate `rate` in the
+    /// direction's units (see [`Self::along_direction`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn motion_stops_within(
+        &self,
+        xi: f64,
+        rate: f64,
+        dt_s: f64,
+        gap_s: f64,
+        spread_m: f64,
+        authority: f64,
+        rate_std: f64,
+    ) -> bool {
+        let mut reach = 0.0;
+        for i in 0..NX / 2 {
             // Each capsule's share of the spread, in the direction's units.
             reach += libm::fabs(self.direction[i]) * 0.5 * spread_m;
         }
@@ -150,6 +170,28 @@ impl<const NX: usize> StationKeeper<NX> {
             libm::fabs(lo).min(libm::fabs(hi))
         };
         nearest <= reach
+    }
+
+    /// The length of the drag direction (see `along_direction`), 1/m.
+    pub fn direction_norm(&self) -> f64 {
+        libm::sqrt(
+            self.direction
+                .iter()
+                .take(NX / 2)
+                .map(|d| d * d)
+                .sum::<f64>(),
+        )
+    }
+
+    /// The capsules' positions `p` (relative to their targets, m, one per
+    /// capsule) along the drag direction: the coordinate the dither holds.
+    pub fn along_direction(&self, p: &[f64]) -> f64 {
+        self.direction
+            .iter()
+            .zip(p)
+            .take(NX / 2)
+            .map(|(d, x)| d * x)
+            .sum()
     }
 
     /// Standard deviation of the relative rate `can_stop` projects, from

@@ -7,7 +7,7 @@ use super::fusion::*;
 use super::numeric::*;
 use super::settings::*;
 use super::status::*;
-use super::Controller;
+use super::{Controller, Mode};
 use crate::estimator::*;
 use crate::factor_fit::*;
 use capsule_mpc_solver::*;
@@ -193,6 +193,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 }
                 self.shrink_factor_sensitivity(r);
                 update_filters(&mut self.est.filters[..m], z, r);
+                if self.sup.mode == Mode::Hold {
+                    self.log_hold_frame(z);
+                }
                 self.fit_factors(z, r);
                 self.refresh_applied_scales();
                 RuntimeStatus::Ok
