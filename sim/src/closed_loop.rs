@@ -279,18 +279,27 @@ pub fn check_extra_delay(config: &Config, extra_delay_s: f64) -> Result<()> {
         config.capsule_count(),
     );
     if tracking_s + extra_delay_s > max_s + capsule_mpc_runtime::controller::TIME_TOLERANCE_S {
-        bail!("{}", gap_beyond_proven(tracking_s + extra_delay_s, max_s));
+        bail!(
+            "{}",
+            gap_beyond_proven(tracking_s + extra_delay_s, max_s, config.capsule_count())
+        );
     }
     Ok(())
 }
 
-/// What to say when tracking + delay is beyond the proven range.
-fn gap_beyond_proven(gap_s: f64, max_s: f64) -> String {
+/// What to say when tracking + delay is beyond the proven range of a
+/// controller for `capsules` capsules.
+fn gap_beyond_proven(gap_s: f64, max_s: f64, capsules: usize) -> String {
+    use capsule_mpc_runtime::controller::{PROVEN_EXTRA_GAP_MANY_S, PROVEN_EXTRA_GAP_S};
+    let margin_s = if capsules <= 2 {
+        PROVEN_EXTRA_GAP_S
+    } else {
+        PROVEN_EXTRA_GAP_MANY_S
+    };
     format!(
         "tracking time + extra delay = {gap_s:.4} s is beyond the range this controller is proven to settle with \
-         ({max_s} s: the generated config's tracking time + delay + {} s for two capsules); regenerate with the \
-         longer scanner.tracking_time_s or extra_delay_s",
-        capsule_mpc_runtime::controller::PROVEN_EXTRA_GAP_S
+         ({max_s} s: the generated config's tracking time + delay + {margin_s} s for {capsules} capsules); \
+         regenerate with the longer scanner.tracking_time_s or extra_delay_s"
     )
 }
 
@@ -395,7 +404,7 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
              (not the paper preset, which has no tables, nor the three-capsule module): use refine once or per-sample"
         ),
         RuntimeError::GapBeyondProven { gap_s, max_s } => {
-            anyhow::anyhow!("{}", gap_beyond_proven(gap_s, max_s))
+            anyhow::anyhow!("{}", gap_beyond_proven(gap_s, max_s, NX / 2))
         }
         e => anyhow::anyhow!("controller settings: {e:?}"),
     })?;
