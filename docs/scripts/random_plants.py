@@ -8,8 +8,17 @@ the paper's size and a random seed; 8 s runs, strict settle. Prints the
 unsettled runs, the median / 90th percentile / worst settle and the
 slowest runs. The draw is seeded, so a run list is reproducible.
 
+With `--odd` each run also draws odd conditions over the same plants and
+targets: a start at rest anywhere in the reach (instead of the origin),
+ideal sampling as well, a random, drifting or constant disturbance of the
+paper's size or none, 0, 5 or 10 ms of extra delay per cycle (two capsules;
+three capsules are proven at their generated gap only) and no, every 7th
+or every 4th tracking frame lost. The unsettled runs are then counted per
+disturbance model (a constant bias is the physical limit of
+known-limits.md).
+
     cargo build --release
-    python3 docs/scripts/random_plants.py target/release/capsule-mpc [RUNS] [DRAW_SEED] [--config FILE]
+    python3 docs/scripts/random_plants.py target/release/capsule-mpc [RUNS] [DRAW_SEED] [--config FILE] [--odd]
 """
 import random
 import sys
@@ -36,34 +45,74 @@ def draw(runs, seed, capsules):
     return out
 
 
-def settle_s(binary, config, run):
-    """Strict settle time of one 8 s run (None: never)."""
+def add_odd_conditions(plan, seed, capsules):
+    """Odd conditions for every run of `plan`, from their own seeded draw
+    (the plants and targets stay those of the plain draw)."""
+    rng = random.Random(1_000_003 * seed + 17)
+    reach_m = 0.03 if capsules == 3 else 0.05
+    for run in plan:
+        run["start_m"] = [round(rng.uniform(-reach_m, reach_m), 4) for _ in range(capsules)]
+        run["sampling"] = rng.choice(["ideal", "constant", "variable"])
+        run["disturbance"] = rng.choice(["random", "drift", "constant"])
+        run["size"] = rng.choice(["paper", "paper", "none"])
+        run["extra_delay_s"] = rng.choice([0.0, 0.005, 0.01]) if capsules == 2 else 0.0
+        run["lose_every"] = rng.choice([0, 7, 4])
+
+
+def metrics(binary, config, run):
+    """The metrics of one 8 s run (strict settle, its minimum-time bound)."""
     args = ["--target", ",".join(f"{x},0" for x in run["target_m"]),
-            "--sampling", run["sampling"], "--disturbance", "paper",
+            "--sampling", run["sampling"], "--disturbance", run.get("size", "paper"),
             "--disturbance-model", run["disturbance"], "--seed", str(run["seed"]),
             "--duration", "8",
             "--plant-drag-scale", ",".join(map(str, run["drag"])),
             "--plant-gain-scale", ",".join(map(str, run["gain"]))]
+    if "start_m" in run:
+        args += ["--start", ",".join(map(str, run["start_m"]))]
+    if run["sampling"] != "ideal":
+        if run.get("extra_delay_s"):
+            args += ["--extra-delay", str(run["extra_delay_s"])]
+        if run.get("lose_every"):
+            args += ["--lose-every", str(run["lose_every"])]
     if config:
         args += ["--config", config]
-    return simulate_args(binary, args)["metrics"]["settle_time_s"]
+    return simulate_args(binary, args)["metrics"]
 
 
 def main():
     args = sys.argv[1:]
     config = pop_option(args, "--config")
+    odd = "--odd" in args
+    if odd:
+        args.remove("--odd")
     binary = args[0]
     runs = int(args[1]) if len(args) > 1 else 400
     seed = int(args[2]) if len(args) > 2 else 1
     capsules = 3 if config and "three" in config else 2
     plan = draw(runs, seed, capsules)
+    if odd:
+        add_odd_conditions(plan, seed, capsules)
     with ThreadPoolExecutor(2) as ex:
-        settle = list(ex.map(lambda r: settle_s(binary, config, r), plan))
+        reports = list(ex.map(lambda r: metrics(binary, config, r), plan))
+    settle = [m["settle_time_s"] for m in reports]
     times = sorted(NEVER_S if s is None else s for s in settle)
     unsettled = sum(1 for s in settle if s is None)
     print(f"{runs} runs ({capsules} capsules, draw {seed}): {unsettled} unsettled; "
           f"settle median {times[len(times) // 2]:.2f} s, 90th percentile "
           f"{times[int(0.9 * len(times))]:.2f} s, worst {times[-1]:.2f} s (99 = never)")
+    if odd:
+        ratios = sorted(m["settle_over_bound"] or NEVER_S for m in reports
+                        if m.get("min_time_bound_s"))
+        if ratios:
+            print(f"  settle / minimum-time bound: median {ratios[len(ratios) // 2]:.2f}, 90th percentile "
+                  f"{ratios[int(0.9 * len(ratios))]:.2f}, worst {ratios[-1]:.2f} ({len(ratios)} runs with a bound)")
+        for model in ("random", "drift", "constant"):
+            picked = sorted(NEVER_S if s is None else s
+                            for s, r in zip(settle, plan) if r["disturbance"] == model)
+            if picked:
+                print(f"  {model}: {sum(1 for s in picked if s == NEVER_S)} of {len(picked)} unsettled; "
+                      f"median {picked[len(picked) // 2]:.2f} s, 90th percentile "
+                      f"{picked[int(0.9 * len(picked))]:.2f} s, worst {picked[-1]:.2f} s")
     slowest = sorted(zip(settle, plan), key=lambda p: -(NEVER_S if p[0] is None else p[0]))
     for s, r in slowest[:5]:
         print(f"  {'never' if s is None else f'{s:.2f} s'}: {r}")
