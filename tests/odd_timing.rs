@@ -175,3 +175,20 @@ fn a_bad_extra_delay_names_the_value_and_the_range() {
     }
     check_extra_delay(&config, PROVEN_EXTRA_GAP_S).unwrap();
 }
+
+/// Three capsules are proven at their generated gap only: any extra delay
+/// is refused, and the message states that capsule count's margin, not
+/// the two-capsule one.
+#[test]
+fn a_three_capsule_gap_is_refused_with_its_own_margin() {
+    let config = Config::embedded_three_capsules();
+    let message = check_extra_delay(&config, 0.005).unwrap_err().to_string();
+    assert!(
+        message.contains("0.0250 s")
+            && message.contains("(0.02 s")
+            && message.contains("+ 0 s for 3 capsules")
+            && !message.contains("two capsules"),
+        "{message}"
+    );
+    check_extra_delay(&config, 0.0).unwrap();
+}
