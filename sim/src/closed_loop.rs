@@ -290,12 +290,7 @@ pub fn check_extra_delay(config: &Config, extra_delay_s: f64) -> Result<()> {
 /// What to say when tracking + delay is beyond the proven range of a
 /// controller for `capsules` capsules.
 fn gap_beyond_proven(gap_s: f64, max_s: f64, capsules: usize) -> String {
-    use capsule_mpc_runtime::controller::{PROVEN_EXTRA_GAP_MANY_S, PROVEN_EXTRA_GAP_S};
-    let margin_s = if capsules <= 2 {
-        PROVEN_EXTRA_GAP_S
-    } else {
-        PROVEN_EXTRA_GAP_MANY_S
-    };
+    let margin_s = capsule_mpc_runtime::controller::proven_extra_gap_s(capsules);
     format!(
         "tracking time + extra delay = {gap_s:.4} s is beyond the range this controller is proven to settle with \
          ({max_s} s: the generated config's tracking time + delay + {margin_s} s for {capsules} capsules); \

@@ -386,10 +386,17 @@ pub const PROVEN_EXTRA_GAP_MANY_S: f64 = 0.0;
 /// generated for `generated_gap_s` is proven to settle with, s: settings
 /// and cycles beyond it are refused (`RuntimeError::GapBeyondProven`).
 pub const fn max_proven_gap_s(generated_gap_s: f64, capsules: usize) -> f64 {
+    generated_gap_s + proven_extra_gap_s(capsules)
+}
+
+/// How much longer than its generated gap a controller of `capsules`
+/// capsules is proven to settle with, s (`PROVEN_EXTRA_GAP_S` for two,
+/// `PROVEN_EXTRA_GAP_MANY_S` from three).
+pub const fn proven_extra_gap_s(capsules: usize) -> f64 {
     if capsules <= 2 {
-        generated_gap_s + PROVEN_EXTRA_GAP_S
+        PROVEN_EXTRA_GAP_S
     } else {
-        generated_gap_s + PROVEN_EXTRA_GAP_MANY_S
+        PROVEN_EXTRA_GAP_MANY_S
     }
 }
 /// How far a measurement time may precede the end of the previous
