@@ -59,7 +59,7 @@
 extern "C" {
 #endif
 
-#define CAPSULE_MPC_ABI_VERSION 5u
+#define CAPSULE_MPC_ABI_VERSION 6u
 
 /* Error codes. */
 #define CAPSULE_MPC_OK 0
@@ -185,6 +185,16 @@ int32_t capsule_mpc_set_sampling(capsule_mpc_t *handle, int32_t mode);
  * GAP_BEYOND_PROVEN when their sum exceeds capsule_mpc_max_gap_s(),
  * BAD_SETTING when one is negative, NON_FINITE when one is not finite. */
 int32_t capsule_mpc_set_timing(capsule_mpc_t *handle, double tracking_time_s, double extra_delay_s);
+
+/* The disturbance the estimator assumes: a bound on the norm of the additive
+ * disturbance of the state derivative, SI (m/s on the position rates, m/s^2
+ * on the accelerations; the paper's 0.05 in cm units is 5e-4). Default: the
+ * generated config's [disturbance] bound (5e-4 for the default config), with
+ * which the docs' figures were measured; 0 tells the estimator the capsules
+ * move exactly as modelled. Only before the loop, as set_timing
+ * (LOOP_RUNNING after). BAD_SETTING when negative or above 1e3, NON_FINITE
+ * when not finite. */
+int32_t capsule_mpc_set_disturbance_bound(capsule_mpc_t *handle, double bound_si);
 
 /* One tracking frame (constant or variable sampling; WRONG_FEED under ideal):
  * positions (n = M) measured at the start of the tracking phase that just

@@ -200,6 +200,11 @@ fn every_handle_fn_returns(h: *mut CapsuleMpc, expected: i32) {
             "set_sampling"
         );
         assert_eq!(capsule_mpc_set_timing(h, 0.02, 0.0), expected, "set_timing");
+        assert_eq!(
+            capsule_mpc_set_disturbance_bound(h, 5e-4),
+            expected,
+            "set_disturbance_bound"
+        );
         assert_eq!(capsule_mpc_set_shooting(h, 1), expected, "set_shooting");
         assert_eq!(
             capsule_mpc_set_model_factors(h, 0, 1.0, 1.2, 0.01, 0.01),
@@ -486,6 +491,53 @@ fn set_timing_refuses_beyond_the_proven_range() {
                 &mut status
             ),
             CAPSULE_MPC_OK
+        );
+    }
+}
+
+/// The disturbance bound: negative, above 1e3 or non-finite refused (and
+/// nothing changed), after the loop started refused; 0 and the paper's
+/// 5e-4 accepted before it.
+#[test]
+fn set_disturbance_bound_bad_args() {
+    let mut b = initialized();
+    let h = handle(&mut b);
+    let before = estimate(h);
+    unsafe {
+        assert_eq!(
+            capsule_mpc_set_disturbance_bound(h, -1e-6),
+            CAPSULE_MPC_ERR_BAD_SETTING
+        );
+        assert_eq!(
+            capsule_mpc_set_disturbance_bound(h, 2e3),
+            CAPSULE_MPC_ERR_BAD_SETTING
+        );
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(
+                capsule_mpc_set_disturbance_bound(h, bad),
+                CAPSULE_MPC_ERR_NON_FINITE
+            );
+        }
+        assert_eq!(estimate(h), before);
+        assert_eq!(capsule_mpc_set_disturbance_bound(h, 0.0), CAPSULE_MPC_OK);
+        assert_eq!(capsule_mpc_set_disturbance_bound(h, 5e-4), CAPSULE_MPC_OK);
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
+        let mut grads = [0.0; 256];
+        let (mut samples, mut status) = (0u32, 0i32);
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(h, 0.02, grads.as_mut_ptr(), 256, &mut samples, &mut status),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_set_disturbance_bound(h, 0.0),
+            CAPSULE_MPC_ERR_LOOP_RUNNING
         );
     }
 }

@@ -58,6 +58,9 @@ pub mod spec {
     pub const EXTRA_DELAY_S: f64 = 0.0;
     /// Position measurement noise (standard deviation), m.
     pub const POSITION_NOISE_M: f64 = 0.0002;
+    /// Disturbance bound the estimator assumes (the config's
+    /// `[disturbance]`), SI: m/s and m/s^2 on the state derivative.
+    pub const DISTURBANCE_BOUND_SI: f64 = 0.0005;
     /// sigma of the switching rule (17).
     pub const SWITCHING_SIGMA: f64 = 0.9;
     /// Lipschitz constants of section III: dynamics, stage cost, terminal cost.
@@ -115,6 +118,7 @@ impl capsule_mpc_solver::Spec<{ spec::M }, { spec::NX }> for Spec {
     const TRACKING_TIME_S: f64 = spec::TRACKING_TIME_S;
     const EXTRA_DELAY_S: f64 = spec::EXTRA_DELAY_S;
     const POSITION_NOISE_M: f64 = spec::POSITION_NOISE_M;
+    const DISTURBANCE_BOUND_SI: f64 = spec::DISTURBANCE_BOUND_SI;
     const SWITCHING_SIGMA: f64 = spec::SWITCHING_SIGMA;
     const L_F: f64 = spec::L_F;
     const L_L: f64 = spec::L_L;

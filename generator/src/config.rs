@@ -399,6 +399,16 @@ impl DisturbanceConfig {
     pub fn bound_si(&self) -> f64 {
         self.bound / self.units.length_scale()
     }
+
+    /// The bound a controller assumes by default, SI: the configured one,
+    /// 0 when the kind is `none`.
+    pub fn design_bound_si(&self) -> f64 {
+        if self.kind == DisturbanceKind::None {
+            0.0
+        } else {
+            self.bound_si()
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -83,6 +83,7 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
     let tracking = float("tracking_time_s", config.scanner.tracking_time_s)?;
     let delay = float("extra_delay_s", config.scanner.extra_delay_s)?;
     let noise = float("position_noise_m", config.measurement.position_noise_m)?;
+    let disturbance = float("disturbance_bound", config.disturbance.design_bound_si())?;
     let sigma = float("switching_sigma", c.switching_sigma)?;
     let hash = hex(&input.config_hash);
     let hash_bytes = input.config_hash.iter().map(|&b| Literal::u8_unsuffixed(b));
@@ -156,6 +157,9 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
             pub const EXTRA_DELAY_S: f64 = #delay;
             /// Position measurement noise (standard deviation), m.
             pub const POSITION_NOISE_M: f64 = #noise;
+            /// Disturbance bound the estimator assumes (the config's
+            /// `[disturbance]`), SI: m/s and m/s^2 on the state derivative.
+            pub const DISTURBANCE_BOUND_SI: f64 = #disturbance;
             /// sigma of the switching rule (17).
             pub const SWITCHING_SIGMA: f64 = #sigma;
             /// Lipschitz constants of section III: dynamics, stage cost, terminal cost.
@@ -214,6 +218,7 @@ pub fn emit_module(input: &EmitInput) -> Result<String, EmitError> {
             const TRACKING_TIME_S: f64 = spec::TRACKING_TIME_S;
             const EXTRA_DELAY_S: f64 = spec::EXTRA_DELAY_S;
             const POSITION_NOISE_M: f64 = spec::POSITION_NOISE_M;
+            const DISTURBANCE_BOUND_SI: f64 = spec::DISTURBANCE_BOUND_SI;
             const SWITCHING_SIGMA: f64 = spec::SWITCHING_SIGMA;
             const L_F: f64 = spec::L_F;
             const L_L: f64 = spec::L_L;

@@ -68,7 +68,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             tracking_time_s: S::TRACKING_TIME_S,
             extra_delay_s: S::EXTRA_DELAY_S,
             position_noise_m: S::POSITION_NOISE_M,
-            disturbance_bound: 0.0,
+            disturbance_bound: S::DISTURBANCE_BOUND_SI,
             max_actuation_samples: S::N,
             hold_enter_position_m: HOLD_ENTER_POSITION_M,
             hold_enter_speed_m_per_s: HOLD_ENTER_SPEED_M_PER_S,

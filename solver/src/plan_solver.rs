@@ -33,6 +33,8 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     const EXTRA_DELAY_S: f64;
     /// Position noise the estimator assumes, m.
     const POSITION_NOISE_M: f64;
+    /// Disturbance bound the estimator assumes, SI.
+    const DISTURBANCE_BOUND_SI: f64;
     /// Switching rule constants (section III) and sigma.
     const L_F: f64;
     const L_L: f64;
@@ -163,6 +165,7 @@ impl<
     const TRACKING_TIME_S: f64 = S::TRACKING_TIME_S;
     const EXTRA_DELAY_S: f64 = S::EXTRA_DELAY_S;
     const POSITION_NOISE_M: f64 = S::POSITION_NOISE_M;
+    const DISTURBANCE_BOUND_SI: f64 = S::DISTURBANCE_BOUND_SI;
     const L_F: f64 = S::L_F;
     const L_L: f64 = S::L_L;
     const L_V: f64 = S::L_V;

@@ -40,6 +40,9 @@ pub trait Spec<const M: usize, const NX: usize>: 'static {
     const EXTRA_DELAY_S: f64;
     /// Position noise the estimator assumes (standard deviation), m.
     const POSITION_NOISE_M: f64;
+    /// Disturbance bound the estimator assumes, SI (m/s and m/s^2 on the
+    /// state derivative).
+    const DISTURBANCE_BOUND_SI: f64;
     /// sigma of the switching rule (17) and the Lipschitz constants of
     /// section III: dynamics, stage cost, terminal cost; ||2 alpha||.
     const SWITCHING_SIGMA: f64;
