@@ -386,6 +386,17 @@ class Controller:
         """'ideal', 'constant' or 'variable' (only before the loop runs)."""
         self._native.set_sampling(sampling)
 
+    def set_disturbance_bound(self, bound_si: float) -> None:
+        """The bound on the additive disturbance of the state derivative
+        the estimator assumes, SI (m/s on the position rates, m/s^2 on the
+        accelerations). Default: the config's ``[disturbance]`` bound, 5e-4
+        for the default config (the paper's 0.05 in cm units), as in every
+        ``simulate`` run under that disturbance; 0 when the capsules move
+        exactly as modelled. Before the loop runs: it restarts the estimate
+        at rest at the estimated positions. ``ValueError`` when negative,
+        above 1e3 or not finite."""
+        self._native.set_disturbance_bound(float(bound_si))
+
     def set_model_factors(
         self, capsule: int, gain: float, drag: float, gain_std: float = 0.03, drag_std: float = 0.03
     ) -> None:

@@ -324,6 +324,16 @@ impl<S: capsule_mpc_runtime::solver::PlanSolver<NX, K>, const NX: usize, const K
             return Ok(());
         }
         settings.sampling = sampling;
+        self.rebuild(settings)
+    }
+    fn set_disturbance_bound(&mut self, bound_si: f64) -> Result<(), RuntimeError> {
+        let mut settings: ControllerSettings = *self.controller.settings();
+        settings.disturbance_bound = bound_si;
+        self.rebuild(settings)
+    }
+    /// The runtime fixes settings at construction: a new controller at the
+    /// estimated positions, at rest, with the target kept.
+    fn rebuild(&mut self, settings: ControllerSettings) -> Result<(), RuntimeError> {
         let x = self.controller.estimate();
         let positions: Vec<f64> = x.iter().step_by(2).copied().collect();
         let mut c = RtController::new(settings, &positions)?;
@@ -428,6 +438,14 @@ impl PyController {
             Sampling::Variable => RtSampling::Variable,
         };
         each!(self, l => l.set_sampling(s)).map_err(runtime_error)
+    }
+    fn set_disturbance_bound(&mut self, bound_si: f64) -> PyResult<()> {
+        if !bound_si.is_finite() {
+            return Err(value_error(format!(
+                "disturbance bound {bound_si} is not finite"
+            )));
+        }
+        each!(self, l => l.set_disturbance_bound(bound_si)).map_err(runtime_error)
     }
     fn set_model_factors(
         &mut self,

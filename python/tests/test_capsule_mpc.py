@@ -288,6 +288,18 @@ def test_calibrated_factors():
         c.set_model_factors(0, 1.0, 1.0, drag_std=float("nan"))
 
 
+def test_disturbance_bound():
+    """The disturbance the estimator assumes: the config's by default,
+    settable before the loop; bad values named."""
+    c = cm.Controller()
+    c.set_disturbance_bound(0.0)
+    c.set_disturbance_bound(5e-4)
+    with pytest.raises(ValueError, match="disturbance_bound"):
+        c.set_disturbance_bound(-1e-6)
+    with pytest.raises(ValueError, match="not finite"):
+        c.set_disturbance_bound(float("nan"))
+
+
 def test_calibrated_std_and_reach_on_a_plant_off_the_model():
     """The told factors' deviation is an argument of simulate and reach;
     reach runs on a plant off the model, told or not; bad values named."""
