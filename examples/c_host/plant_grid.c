@@ -1,0 +1,264 @@
+/*
+ * The model-mismatch grid through the C ABI, on this host's own plant.
+ *
+ * Plant: two capsules on one gradient u (T/m), each off the model by its
+ * own factors:
+ *   x' = v + d_x,  v' = -s_b b v|v| + s_g g u + d_v,
+ *   g = 173.25 (m/s^2)/(T/m), b = 134.7 and 16.84 1/m,
+ * integrated with RK4 at 1 ms. d is the paper's disturbance: a vector
+ * uniform in the 4-ball of radius 5e-4 (m/s, m/s^2; the paper's 0.05 in cm
+ * units), redrawn every 20 ms. Frames: positions with Gaussian noise of
+ * 0.2 mm, measured at the start of each 20 ms tracking phase (u = 0); the
+ * controller's samples are played, 20 ms each, from its end.
+ *
+ * Grid: the six plants of docs/known-limits.md ("Capsules that are not
+ * quite the model") x constant and variable sampling x four targets
+ * ((2, 3), (2, -1), (-1, 2), (3, 1) cm from rest at the origin) x seeds
+ * 1..S. Strict settle: both positions within 1 mm of the target and both
+ * speeds below 5 mm/s from then to the end of the run.
+ *
+ * Usage: plant_grid [seeds] [duration_s] [told_disturbance_si] [grid]
+ *        seeds (default 8), duration (default 6 s), the disturbance bound
+ *        the controller is told (capsule_mpc_set_disturbance_bound; a
+ *        negative value or none: not called, the config's 5e-4), and
+ *        grid = 1 for the 24 targets of +-4 cm in 2 cm steps instead of
+ *        the four.
+ * Prints one row per sampling and plant; exit status 0 only when every
+ * run settles and no more than 1 % of the true frames are rejected.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "capsule_mpc.h"
+
+#define NCAP 2
+#define NX (2 * NCAP)
+#define STEP_S 0.001
+#define TRACKING_S 0.020
+#define REDRAW_S 0.020
+#define DISTURBANCE_SI 5e-4
+#define NOISE_M 2e-4
+#define TOL_M 0.001
+#define SPEED_TOL 0.005
+#define MAX_PLAN 256
+#define MAX_RUNS 1024
+#define NTARGETS_MAX 24
+#define NPLANTS 6
+#define REJECTED_FRACTION_MAX 0.01
+
+static const double G[NCAP] = {173.24840764331208, 173.24840764331208};
+static const double B[NCAP] = {134.71337579617835, 16.839171974522294};
+
+static const double FOUR_TARGETS[4][NCAP] = {{0.02, 0.03}, {0.02, -0.01}, {-0.01, 0.02}, {0.03, 0.01}};
+
+struct plant_factors {
+    const char *name;
+    double drag[NCAP];
+    double gain[NCAP];
+};
+
+static const struct plant_factors PLANTS[NPLANTS] = {
+    {"model", {1.0, 1.0}, {1.0, 1.0}},       {"drag x0.8", {0.8, 0.8}, {1.0, 1.0}},
+    {"drag x1.2", {1.2, 1.2}, {1.0, 1.0}},   {"drag (x1.2, x0.8)", {1.2, 0.8}, {1.0, 1.0}},
+    {"gain x0.9", {1.0, 1.0}, {0.9, 0.9}},   {"gain x1.1", {1.0, 1.0}, {1.1, 1.1}},
+};
+
+/* Workspace: static, generously sized and aligned; checked at run time. */
+static _Alignas(64) unsigned char workspace[1 << 16];
+
+/* splitmix64: this host's own seeded random numbers. */
+static uint64_t next_u64(uint64_t *state) {
+    uint64_t z = (*state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+/* Uniform in [-1, 1). */
+static double uniform(uint64_t *state) {
+    return (double)(next_u64(state) >> 11) * 0x1.0p-53 * 2.0 - 1.0;
+}
+
+/* Standard normal (Box-Muller). */
+static double gaussian(uint64_t *state) {
+    double u1 = 0.5 * (uniform(state) + 1.0), u2 = 0.5 * (uniform(state) + 1.0);
+    if (u1 < 1e-300) u1 = 1e-300;
+    return sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
+}
+
+struct plant {
+    double s[NX];
+    double drag[NCAP], gain[NCAP];
+    double d[NX];
+    double t, next_redraw;
+    uint64_t rng;
+};
+
+static void redraw(struct plant *p) {
+    double v[NX], n2;
+    do { /* rejection: uniform in the unit ball */
+        n2 = 0.0;
+        for (int j = 0; j < NX; j++) {
+            v[j] = uniform(&p->rng);
+            n2 += v[j] * v[j];
+        }
+    } while (n2 > 1.0);
+    for (int j = 0; j < NX; j++) p->d[j] = DISTURBANCE_SI * v[j];
+}
+
+static void deriv(const struct plant *p, const double s[NX], double u, double out[NX]) {
+    for (int i = 0; i < NCAP; i++) {
+        double v = s[2 * i + 1];
+        out[2 * i] = v + p->d[2 * i];
+        out[2 * i + 1] = -p->drag[i] * B[i] * v * fabs(v) + p->gain[i] * G[i] * u + p->d[2 * i + 1];
+    }
+}
+
+static void rk4_step(struct plant *p, double u) {
+    double k1[NX], k2[NX], k3[NX], k4[NX], t[NX];
+    deriv(p, p->s, u, k1);
+    for (int j = 0; j < NX; j++) t[j] = p->s[j] + 0.5 * STEP_S * k1[j];
+    deriv(p, t, u, k2);
+    for (int j = 0; j < NX; j++) t[j] = p->s[j] + 0.5 * STEP_S * k2[j];
+    deriv(p, t, u, k3);
+    for (int j = 0; j < NX; j++) t[j] = p->s[j] + STEP_S * k3[j];
+    deriv(p, t, u, k4);
+    for (int j = 0; j < NX; j++) p->s[j] += STEP_S / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+}
+
+/* Holds u for duration_s; last_out_s: the last instant outside the band. */
+static void hold(struct plant *p, double u, double duration_s, const double *target, double *last_out_s) {
+    long steps = lround(duration_s / STEP_S);
+    for (long k = 0; k < steps; k++) {
+        if (p->t >= p->next_redraw - 1e-9) {
+            redraw(p);
+            p->next_redraw += REDRAW_S;
+        }
+        rk4_step(p, u);
+        p->t += STEP_S;
+        int inside = 1;
+        for (int i = 0; i < NCAP; i++)
+            inside = inside && fabs(p->s[2 * i] - target[i]) <= TOL_M && fabs(p->s[2 * i + 1]) < SPEED_TOL;
+        if (!inside) *last_out_s = p->t;
+    }
+}
+
+struct outcome {
+    double settle_s; /* < 0: never */
+    int frames, rejected;
+};
+
+/* One run; a negative return is a C ABI error. */
+static int run(int mode, const struct plant_factors *pf, const double *target_x, int seed, double duration_s,
+               double told, struct outcome *out) {
+    const double start[NCAP] = {0.0, 0.0};
+    double target[NX] = {target_x[0], 0.0, target_x[1], 0.0};
+    if (capsule_mpc_init(workspace, sizeof workspace, start, NCAP) != CAPSULE_MPC_OK) return -1;
+    capsule_mpc_t *h = (capsule_mpc_t *)workspace;
+    if (capsule_mpc_set_sampling(h, mode) != CAPSULE_MPC_OK) return -2;
+    if (told >= 0.0 && capsule_mpc_set_disturbance_bound(h, told) != CAPSULE_MPC_OK) return -3;
+    if (capsule_mpc_set_target(h, target, NX) != CAPSULE_MPC_OK) return -4;
+
+    struct plant p;
+    memset(&p, 0, sizeof p);
+    for (int i = 0; i < NCAP; i++) {
+        p.drag[i] = pf->drag[i];
+        p.gain[i] = pf->gain[i];
+    }
+    p.rng = 0x5EEDull * (uint64_t)seed + 17u;
+    uint64_t noise_rng = 0xF4A3Eull * (uint64_t)seed + 29u;
+    double last_out_s = 0.0, grads[MAX_PLAN];
+    out->frames = out->rejected = 0;
+    while (p.t < duration_s - 1e-9) {
+        double z[NCAP];
+        for (int i = 0; i < NCAP; i++) z[i] = p.s[2 * i] + NOISE_M * gaussian(&noise_rng);
+        double t_meas = p.t;
+        hold(&p, 0.0, TRACKING_S, target_x, &last_out_s);
+        if (capsule_mpc_feed_tracking(h, z, NCAP, t_meas, 0) != CAPSULE_MPC_OK) return -5;
+        uint32_t samples = 0;
+        int32_t status = 0;
+        if (capsule_mpc_next_actuation(h, p.t, grads, MAX_PLAN, &samples, &status) != CAPSULE_MPC_OK) return -6;
+        out->frames++;
+        if (status == CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED) out->rejected++;
+        for (uint32_t k = 0; k < samples && p.t < duration_s - 1e-9; k++)
+            hold(&p, grads[k], 0.02, target_x, &last_out_s);
+    }
+    out->settle_s = last_out_s < duration_s - 1e-9 ? last_out_s : -1.0;
+    return 0;
+}
+
+static int cmp_double(const void *a, const void *b) {
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+int main(int argc, char **argv) {
+    int seeds = argc > 1 ? atoi(argv[1]) : 8;
+    double duration_s = argc > 2 ? atof(argv[2]) : 6.0;
+    double told = argc > 3 ? atof(argv[3]) : -1.0;
+    int grid = argc > 4 ? atoi(argv[4]) : 0;
+    double targets[NTARGETS_MAX][NCAP];
+    int ntargets = 0;
+    if (grid) {
+        for (int a = -2; a <= 2; a++)
+            for (int b = -2; b <= 2; b++)
+                if (a != 0 || b != 0) {
+                    targets[ntargets][0] = 0.02 * a;
+                    targets[ntargets][1] = 0.02 * b;
+                    ntargets++;
+                }
+    } else {
+        for (; ntargets < 4; ntargets++) {
+            targets[ntargets][0] = FOUR_TARGETS[ntargets][0];
+            targets[ntargets][1] = FOUR_TARGETS[ntargets][1];
+        }
+    }
+    if (seeds < 1 || seeds * ntargets > MAX_RUNS || !(duration_s > 0.0)) {
+        fprintf(stderr, "usage: plant_grid [seeds 1-%d] [duration_s > 0] [told_disturbance_si] [grid 0|1]\n",
+                MAX_RUNS / ntargets);
+        return 2;
+    }
+    if (capsule_mpc_abi_version() != CAPSULE_MPC_ABI_VERSION || capsule_mpc_workspace_size() > sizeof workspace ||
+        capsule_mpc_workspace_align() > 64) {
+        fprintf(stderr, "library build does not match this host\n");
+        return 2;
+    }
+    printf("# plant_grid: %d targets x seeds 1-%d, paper disturbance, 0.2 mm frames, %.1f s runs, strict settle; "
+           "told disturbance %s\n",
+           ntargets, seeds, duration_s, told >= 0.0 ? argv[3] : "the config's (not set)");
+    printf("# %-9s %-18s %8s %9s %8s %9s\n", "sampling", "plant", "settled", "median_s", "worst_s", "rejected");
+    int ok = 1;
+    const int modes[2] = {CAPSULE_MPC_SAMPLING_CONSTANT, CAPSULE_MPC_SAMPLING_VARIABLE};
+    for (int m = 0; m < 2; m++) {
+        for (int pi = 0; pi < NPLANTS; pi++) {
+            double settle[MAX_RUNS];
+            int n = 0, settled = 0, frames = 0, rejected = 0;
+            for (int ti = 0; ti < ntargets; ti++) {
+                for (int seed = 1; seed <= seeds; seed++) {
+                    struct outcome o;
+                    int rc = run(modes[m], &PLANTS[pi], targets[ti], seed, duration_s, told, &o);
+                    if (rc != 0) {
+                        fprintf(stderr, "C ABI error in run (%d): step %d\n", seed, rc);
+                        return 2;
+                    }
+                    /* Unsettled runs sort last (never). */
+                    settle[n++] = o.settle_s >= 0.0 ? o.settle_s : INFINITY;
+                    settled += o.settle_s >= 0.0;
+                    frames += o.frames;
+                    rejected += o.rejected;
+                }
+            }
+            qsort(settle, (size_t)n, sizeof settle[0], cmp_double);
+            double median = n % 2 ? settle[n / 2] : 0.5 * (settle[n / 2 - 1] + settle[n / 2]);
+            printf("  %-9s %-18s %4d/%-3d %9.2f %8.2f %5d/%d\n", m == 0 ? "constant" : "variable",
+                   PLANTS[pi].name, settled, n, median, settle[n - 1], rejected, frames);
+            if (settled < n || rejected > REJECTED_FRACTION_MAX * frames) ok = 0;
+        }
+    }
+    printf(ok ? "# PASS: every run settles, at most 1 %% of frames rejected\n"
+              : "# FAIL: a run did not settle or more than 1 %% of frames were rejected\n");
+    return ok ? 0 : 1;
+}
