@@ -229,10 +229,12 @@ int main(int argc, char **argv) {
     printf("# plant_grid: %d targets x seeds 1-%d, paper disturbance, 0.2 mm frames, %.1f s runs, strict settle; "
            "told disturbance %s\n",
            ntargets, seeds, duration_s, told >= 0.0 ? argv[3] : "the config's (not set)");
-    printf("# %-9s %-18s %8s %9s %8s %9s\n", "sampling", "plant", "settled", "median_s", "worst_s", "rejected");
+    printf("# %-9s %-18s %8s %9s %8s %13s %9s\n", "sampling", "plant", "settled", "median_s", "worst_s",
+           "x the model's", "rejected");
     int ok = 1;
     const int modes[2] = {CAPSULE_MPC_SAMPLING_CONSTANT, CAPSULE_MPC_SAMPLING_VARIABLE};
     for (int m = 0; m < 2; m++) {
+        double model_median = 0.0, model_worst = 0.0;
         for (int pi = 0; pi < NPLANTS; pi++) {
             double settle[MAX_RUNS];
             int n = 0, settled = 0, frames = 0, rejected = 0;
@@ -253,8 +255,14 @@ int main(int argc, char **argv) {
             }
             qsort(settle, (size_t)n, sizeof settle[0], cmp_double);
             double median = n % 2 ? settle[n / 2] : 0.5 * (settle[n / 2 - 1] + settle[n / 2]);
-            printf("  %-9s %-18s %4d/%-3d %9.2f %8.2f %5d/%d\n", m == 0 ? "constant" : "variable",
-                   PLANTS[pi].name, settled, n, median, settle[n - 1], rejected, frames);
+            if (pi == 0) {
+                model_median = median;
+                model_worst = settle[n - 1];
+            }
+            /* Median and worst over the model's: the issue asks at most 1.3 and 2. */
+            printf("  %-9s %-18s %4d/%-3d %9.2f %8.2f   %4.2f / %4.2f %5d/%d\n", m == 0 ? "constant" : "variable",
+                   PLANTS[pi].name, settled, n, median, settle[n - 1], median / model_median,
+                   settle[n - 1] / model_worst, rejected, frames);
             if (settled < n || rejected > REJECTED_FRACTION_MAX * frames) ok = 0;
         }
     }
