@@ -77,6 +77,20 @@ impl<'t, 'a> ExplicitSample<'t, 'a> {
         self.tables
             .record_f64(self.at, self.tables.explicit_layout.gradient(), a)
     }
+    /// Hessian entries `idx..idx + out.len()` of the upper triangle (a row
+    /// from its diagonal on, read as one run).
+    #[inline(always)]
+    pub fn hessian_run(&self, idx: usize, out: &mut [f64]) {
+        self.tables
+            .record_f64s(self.at, self.tables.explicit_layout.hessian(), idx, out)
+    }
+    /// Row `a` of the sensitivity: d gradient_a / d deviation_j for every j.
+    #[inline(always)]
+    pub fn sensitivity_row(&self, a: usize, out: &mut [f64]) {
+        let l = self.tables.explicit_layout;
+        self.tables
+            .record_f64s(self.at, l.sensitivity(), a * l.nx, out)
+    }
     /// d gradient_a / d deviation_j.
     #[inline(always)]
     pub fn sensitivity(&self, a: usize, j: usize) -> f64 {
@@ -94,6 +108,13 @@ impl<'t, 'a> ExplicitSample<'t, 'a> {
     pub fn cost_gradient(&self, r: usize) -> f64 {
         self.tables
             .record_f64(self.at, self.tables.explicit_layout.cost_gradient(), r)
+    }
+    /// Row `r` of the cost model's Hessian.
+    #[inline(always)]
+    pub fn cost_hessian_row(&self, r: usize, out: &mut [f64]) {
+        let l = self.tables.explicit_layout;
+        self.tables
+            .record_f64s(self.at, l.cost_hessian(), r * l.nx, out)
     }
     #[inline(always)]
     pub fn cost_hessian(&self, r: usize, c: usize) -> f64 {
@@ -122,6 +143,17 @@ pub const EXPLICIT_SUCCESSORS: usize = 10;
 #[inline(always)]
 pub fn explicit_state(t: &Tables, slot: usize, j: usize) -> f64 {
     t.f64_at(Section::ExplicitState, slot * t.dims.nx + j)
+}
+
+/// Sample `slot`'s relative state (its linearization point), read as one
+/// run; NaN past the stored samples.
+#[inline(always)]
+pub fn explicit_state_row<const NX: usize>(t: &Tables, slot: usize) -> [f64; NX] {
+    let mut out = [f64::NAN; NX];
+    if let Some(first) = slot.checked_mul(t.dims.nx) {
+        t.f64_run(Section::ExplicitState, first, &mut out);
+    }
+    out
 }
 
 /// The stored sample for relative state `e`: at rest on the fine grid,
@@ -276,10 +308,11 @@ fn consider<const NX: usize>(
     if slot >= t.explicit_count {
         return;
     }
+    let state = explicit_state_row::<NX>(t, slot);
     let mut dist = 0.0;
     let mut j = 0;
     while j < NX {
-        let r = (e[j] - explicit_state(t, slot, j)) / index_axis(t, j).step;
+        let r = (e[j] - state[j]) / index_axis(t, j).step;
         dist += r * r;
         j += 1;
     }
@@ -316,15 +349,10 @@ fn stored_tail<const K: usize>(t: &Tables, s: &ExplicitSample, out: &mut [f64; K
         _ => PlanSet::CoastedFine,
     };
     let offset = s.offset() as usize;
-    let mut i = 0;
-    while i < K {
-        out[i] = if offset + i < K {
-            t.plan_u(set, p, offset + i)
-        } else {
-            0.0
-        };
-        i += 1;
-    }
+    // The plan's inputs from the offset on are one run of its row.
+    let stored = K.saturating_sub(offset);
+    t.plan_u_run(set, p, offset, &mut out[..stored]);
+    out[stored..].fill(0.0);
 }
 
 /// Loads sample `s`'s window QP at deviation `d` into `qp`, with the box
@@ -337,20 +365,26 @@ pub fn load_qp<const NX: usize, const N: usize, const K: usize>(
     qp: &mut BoxQp<N>,
 ) {
     let mut idx = 0;
+    let mut row = [0.0; N];
+    let mut sensitivity = [0.0; NX];
     let mut a = 0;
     while a < N {
+        // Row a of the upper triangle, from the diagonal on, is one run.
+        let run = &mut row[..N - a];
+        s.hessian_run(idx, run);
         let mut b = a;
         while b < N {
-            let h = s.hessian(idx);
+            let h = run[b - a];
             qp.h[a][b] = h;
             qp.h[b][a] = h;
-            idx += 1;
             b += 1;
         }
+        idx += N - a;
+        s.sensitivity_row(a, &mut sensitivity);
         let mut g = 0.0;
         let mut j = 0;
         while j < NX {
-            g += s.sensitivity(a, j) * d[j];
+            g += sensitivity[j] * d[j];
             j += 1;
         }
         qp.g[a] = g;
@@ -379,10 +413,11 @@ pub fn explicit_plan<const NX: usize, const N: usize, const K: usize>(
     let slot = explicit_slot(t, e, coasted, last)?;
     let s = ExplicitSample::get(t, slot)?;
     stored_tail(t, &s, out);
+    let state = explicit_state_row::<NX>(t, slot);
     let mut d = [0.0; NX];
     let mut j = 0;
     while j < NX {
-        d[j] = e[j] - explicit_state(t, slot, j);
+        d[j] = e[j] - state[j];
         j += 1;
     }
     load_qp(&s, u_max, &d, out, qp);
@@ -414,12 +449,14 @@ fn predicted_cost<const NX: usize, const N: usize>(
     qp: &BoxQp<N>,
 ) -> f64 {
     let mut half = 0.0;
+    let mut row = [0.0; NX];
     let mut r = 0;
     while r < NX {
+        s.cost_hessian_row(r, &mut row);
         let mut hd = 0.0;
         let mut c = 0;
         while c < NX {
-            hd += s.cost_hessian(r, c) * d[c];
+            hd += row[c] * d[c];
             c += 1;
         }
         half += d[r] * (s.cost_gradient(r) + 0.5 * hd);

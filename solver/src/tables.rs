@@ -495,6 +495,23 @@ impl<'a> Tables<'a> {
         self.f64_at(section, p * self.dims.k + k)
     }
 
+    /// Inputs `k..k + out.len()` of plan `p` of `set` as one run (NaN past
+    /// the plan's length, as `plan_u`).
+    #[inline(always)]
+    pub fn plan_u_run(&self, set: PlanSet, p: usize, k: usize, out: &mut [f64]) {
+        let section = match set {
+            PlanSet::BackToBack => Section::PlanU,
+            PlanSet::Coasted => Section::CoastedPlanU,
+            PlanSet::Fine => Section::FinePlanU,
+            PlanSet::CoastedFine => Section::CoastedFinePlanU,
+        };
+        let first = p.checked_mul(self.dims.k).and_then(|row| row.checked_add(k));
+        match first {
+            Some(first) if k + out.len() <= self.dims.k => self.f64_run(section, first, out),
+            _ => out.fill(f64::NAN),
+        }
+    }
+
     /// Byte position of explicit sample `slot`'s record (None past the end).
     #[inline(always)]
     pub fn explicit_record(&self, slot: usize) -> Option<usize> {
@@ -509,6 +526,25 @@ impl<'a> Tables<'a> {
     #[inline(always)]
     pub fn record_f64(&self, at: usize, field: usize, i: usize) -> f64 {
         read_f64(self.bytes, at + field + 8 * i)
+    }
+
+    /// `out.len()` consecutive f64s from byte `at + field + 8 first` of
+    /// the file (a run of an explicit record's field): one bounds check
+    /// for the run instead of one per value; NaN past the file's end.
+    #[inline(always)]
+    pub fn record_f64s(&self, at: usize, field: usize, first: usize, out: &mut [f64]) {
+        read_f64s(self.bytes, at + field + 8 * first, out);
+    }
+
+    /// Elements `first..first + out.len()` of an f64 section (NaN past its
+    /// end), with one bounds check for the run.
+    #[inline(always)]
+    pub fn f64_run(&self, section: Section, first: usize, out: &mut [f64]) {
+        let bytes = self.section_bytes(section);
+        match first.checked_mul(8) {
+            Some(at) => read_f64s(bytes, at, out),
+            None => out.fill(f64::NAN),
+        }
     }
 
     #[inline(always)]
@@ -533,4 +569,23 @@ fn read_u64(bytes: &[u8], at: usize) -> u64 {
 #[inline(always)]
 fn read_f64(bytes: &[u8], at: usize) -> f64 {
     f64::from_bits(read_u64(bytes, at))
+}
+
+/// `out.len()` little-endian f64s from byte `at` of `bytes`; NaN for the
+/// whole run when it does not fit.
+#[inline(always)]
+fn read_f64s(bytes: &[u8], at: usize, out: &mut [f64]) {
+    let run = at
+        .checked_add(8 * out.len())
+        .and_then(|end| bytes.get(at..end));
+    match run {
+        Some(run) => {
+            for (o, c) in out.iter_mut().zip(run.chunks_exact(8)) {
+                let mut a = [0u8; 8];
+                a.copy_from_slice(c);
+                *o = f64::from_le_bytes(a);
+            }
+        }
+        None => out.fill(f64::NAN),
+    }
 }
