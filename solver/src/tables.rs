@@ -505,7 +505,9 @@ impl<'a> Tables<'a> {
             PlanSet::Fine => Section::FinePlanU,
             PlanSet::CoastedFine => Section::CoastedFinePlanU,
         };
-        let first = p.checked_mul(self.dims.k).and_then(|row| row.checked_add(k));
+        let first = p
+            .checked_mul(self.dims.k)
+            .and_then(|row| row.checked_add(k));
         match first {
             Some(first) if k + out.len() <= self.dims.k => self.f64_run(section, first, out),
             _ => out.fill(f64::NAN),
