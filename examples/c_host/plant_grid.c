@@ -20,12 +20,14 @@
  * speeds below 5 mm/s from then to the end of the run.
  *
  * Usage: plant_grid [seeds] [duration_s] [told_disturbance_si] [grid] [model]
+ *                   [jitter] [lose_every]
  *        seeds (default 8), duration (default 6 s), the disturbance bound
  *        the controller is told (capsule_mpc_set_disturbance_bound; a
  *        negative value or none: not called, the config's 5e-4), and
  *        grid = 1 for the 24 targets of +-4 cm in 2 cm steps instead of
  *        the four, and the disturbance model: random (default), drift,
- *        constant or none.
+ *        constant or none; jitter = 1: each tracking phase 10-30 ms long
+ *        (seeded), and lose_every = n > 0: every n-th frame lost.
  * Prints one row per sampling and plant; exit status 0 only when every
  * run settles and no more than 1 % of the true frames are rejected.
  */
@@ -207,14 +209,21 @@ struct outcome {
 };
 
 /* One run; a negative return is a C ABI error. */
+struct timing {
+    int jitter;     /* tracking phases of 10-30 ms instead of 20 ms */
+    int lose_every; /* every n-th frame lost (0: none) */
+};
+
 static int run(int mode, const struct plant_factors *pf, const double *target_x, int seed, double duration_s,
-               double told, enum model model, struct outcome *out) {
+               double told, enum model model, struct timing timing, struct outcome *out) {
     const double start[NCAP] = {0.0, 0.0};
     double target[NX] = {target_x[0], 0.0, target_x[1], 0.0};
     if (capsule_mpc_init(workspace, sizeof workspace, start, NCAP) != CAPSULE_MPC_OK) return -1;
     capsule_mpc_t *h = (capsule_mpc_t *)workspace;
     if (capsule_mpc_set_sampling(h, mode) != CAPSULE_MPC_OK) return -2;
     if (told >= 0.0 && capsule_mpc_set_disturbance_bound(h, told) != CAPSULE_MPC_OK) return -3;
+    /* With jitter the plans model the longest phase until gaps are measured. */
+    if (timing.jitter && capsule_mpc_set_timing(h, 0.030, 0.0) != CAPSULE_MPC_OK) return -7;
     if (capsule_mpc_set_target(h, target, NX) != CAPSULE_MPC_OK) return -4;
 
     struct plant p;
@@ -227,18 +236,24 @@ static int run(int mode, const struct plant_factors *pf, const double *target_x,
     p.model = model;
     start_disturbance(&p);
     uint64_t noise_rng = 0xF4A3Eull * (uint64_t)seed + 29u;
+    uint64_t jitter_rng = 0x717E5ull * (uint64_t)seed + 3u;
+    int cycle = 0;
     double last_out_s = 0.0, grads[MAX_PLAN];
     out->frames = out->rejected = 0;
     while (p.t < duration_s - 1e-9) {
         double z[NCAP];
         for (int i = 0; i < NCAP; i++) z[i] = p.s[2 * i] + NOISE_M * gaussian(&noise_rng);
         double t_meas = p.t;
-        hold(&p, 0.0, TRACKING_S, target_x, &last_out_s);
-        if (capsule_mpc_feed_tracking(h, z, NCAP, t_meas, 0) != CAPSULE_MPC_OK) return -5;
+        /* Whole milliseconds, 10-30 ms with jitter. */
+        double tracking_s = timing.jitter ? 0.001 * (double)(10 + next_u64(&jitter_rng) % 21) : TRACKING_S;
+        hold(&p, 0.0, tracking_s, target_x, &last_out_s);
+        cycle++;
+        int lost = timing.lose_every > 0 && cycle % timing.lose_every == 0;
+        if (capsule_mpc_feed_tracking(h, lost ? NULL : z, NCAP, t_meas, lost) != CAPSULE_MPC_OK) return -5;
         uint32_t samples = 0;
         int32_t status = 0;
         if (capsule_mpc_next_actuation(h, p.t, grads, MAX_PLAN, &samples, &status) != CAPSULE_MPC_OK) return -6;
-        out->frames++;
+        if (!lost) out->frames++;
         if (status == CAPSULE_MPC_STATUS_MEASUREMENT_REJECTED) out->rejected++;
         for (uint32_t k = 0; k < samples && p.t < duration_s - 1e-9; k++)
             hold(&p, grads[k], 0.02, target_x, &last_out_s);
@@ -257,6 +272,11 @@ int main(int argc, char **argv) {
     double duration_s = argc > 2 ? atof(argv[2]) : 6.0;
     double told = argc > 3 ? atof(argv[3]) : -1.0;
     int grid = argc > 4 ? atoi(argv[4]) : 0;
+    struct timing timing = {argc > 6 ? atoi(argv[6]) != 0 : 0, argc > 7 ? atoi(argv[7]) : 0};
+    if (timing.lose_every < 0) {
+        fprintf(stderr, "lose_every %d: expected 0 (none) or a positive frame count\n", timing.lose_every);
+        return 2;
+    }
     enum model model = RANDOM;
     if (argc > 5) {
         int found = 0;
@@ -297,9 +317,10 @@ int main(int argc, char **argv) {
         return 2;
     }
     printf("# plant_grid: %d targets x seeds 1-%d, disturbance %s%s, 0.2 mm frames, %.1f s runs, "
-           "strict settle; told disturbance %s\n",
+           "strict settle; told disturbance %s; tracking %s; frames lost: %s%d\n",
            ntargets, seeds, MODEL_NAMES[model], model == NONE ? "" : " (paper size)", duration_s,
-           told >= 0.0 ? argv[3] : "the config's (not set)");
+           told >= 0.0 ? argv[3] : "the config's (not set)", timing.jitter ? "10-30 ms" : "20 ms",
+           timing.lose_every > 0 ? "every " : "", timing.lose_every);
     printf("# %-9s %-18s %8s %9s %8s %13s %9s\n", "sampling", "plant", "settled", "median_s", "worst_s",
            "x the model's", "rejected");
     int ok = 1;
@@ -312,7 +333,7 @@ int main(int argc, char **argv) {
             for (int ti = 0; ti < ntargets; ti++) {
                 for (int seed = 1; seed <= seeds; seed++) {
                     struct outcome o;
-                    int rc = run(modes[m], &PLANTS[pi], targets[ti], seed, duration_s, told, model, &o);
+                    int rc = run(modes[m], &PLANTS[pi], targets[ti], seed, duration_s, told, model, timing, &o);
                     if (rc != 0) {
                         fprintf(stderr, "C ABI error in run (%d): step %d\n", seed, rc);
                         return 2;
