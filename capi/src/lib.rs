@@ -366,12 +366,7 @@ pub unsafe extern "C" fn capsule_mpc_set_sampling(handle: *mut CapsuleMpc, mode:
         if ws.controller.settings().sampling == sampling {
             return Ok(());
         }
-        if ws.running {
-            return Err(CAPSULE_MPC_ERR_LOOP_RUNNING);
-        }
-        let mut settings = *ws.controller.settings();
-        settings.sampling = sampling;
-        rebuild(ws, settings)
+        change_before_loop(ws, |s| s.sampling = sampling)
     })();
     code(r)
 }
@@ -397,13 +392,10 @@ pub unsafe extern "C" fn capsule_mpc_set_timing(
         if !tracking_time_s.is_finite() || !extra_delay_s.is_finite() {
             return Err(CAPSULE_MPC_ERR_NON_FINITE);
         }
-        if ws.running {
-            return Err(CAPSULE_MPC_ERR_LOOP_RUNNING);
-        }
-        let mut settings = *ws.controller.settings();
-        settings.tracking_time_s = tracking_time_s;
-        settings.extra_delay_s = extra_delay_s;
-        rebuild(ws, settings)
+        change_before_loop(ws, |s| {
+            s.tracking_time_s = tracking_time_s;
+            s.extra_delay_s = extra_delay_s;
+        })
     })();
     code(r)
 }
@@ -430,14 +422,20 @@ pub unsafe extern "C" fn capsule_mpc_set_disturbance_bound(
         if !bound_si.is_finite() {
             return Err(CAPSULE_MPC_ERR_NON_FINITE);
         }
-        if ws.running {
-            return Err(CAPSULE_MPC_ERR_LOOP_RUNNING);
-        }
-        let mut settings = *ws.controller.settings();
-        settings.disturbance_bound = bound_si;
-        rebuild(ws, settings)
+        change_before_loop(ws, |s| s.disturbance_bound = bound_si)
     })();
     code(r)
+}
+
+/// A setting that only the set-up may change: LOOP_RUNNING once the loop
+/// has started, else the controller rebuilt with `change` applied.
+fn change_before_loop(ws: &mut CapsuleMpc, change: impl FnOnce(&mut ControllerSettings)) -> Res {
+    if ws.running {
+        return Err(CAPSULE_MPC_ERR_LOOP_RUNNING);
+    }
+    let mut settings = *ws.controller.settings();
+    change(&mut settings);
+    rebuild(ws, settings)
 }
 
 /// The runtime fixes settings at construction: rebuilds the controller

@@ -9,6 +9,28 @@ use capsule_mpc_capi::*;
 mod handle;
 use handle::*;
 
+/// Starts the loop on `h`: target C, a frame at 0 s, an actuation from
+/// 0.02 s; returns the samples it plays.
+fn start_loop(h: *mut CapsuleMpc) -> u32 {
+    let mut grads = [0.0; 256];
+    let (mut samples, mut status) = (0u32, 0i32);
+    unsafe {
+        assert_eq!(
+            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
+            CAPSULE_MPC_OK
+        );
+        assert_eq!(
+            capsule_mpc_next_actuation(h, 0.02, grads.as_mut_ptr(), 256, &mut samples, &mut status),
+            CAPSULE_MPC_OK
+        );
+    }
+    samples
+}
+
 /// The disturbance bound: negative, above 1e3 or non-finite refused (and
 /// nothing changed), after the loop started refused; 0 and the paper's
 /// 5e-4 accepted before it.
@@ -43,20 +65,7 @@ fn set_disturbance_bound_bad_args() {
         assert_eq!(estimate(h), before);
         assert_eq!(capsule_mpc_set_disturbance_bound(h, 0.0), CAPSULE_MPC_OK);
         assert_eq!(capsule_mpc_set_disturbance_bound(h, 5e-4), CAPSULE_MPC_OK);
-        assert_eq!(
-            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
-            CAPSULE_MPC_OK
-        );
-        let mut grads = [0.0; 256];
-        let (mut samples, mut status) = (0u32, 0i32);
-        assert_eq!(
-            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
-            CAPSULE_MPC_OK
-        );
-        assert_eq!(
-            capsule_mpc_next_actuation(h, 0.02, grads.as_mut_ptr(), 256, &mut samples, &mut status),
-            CAPSULE_MPC_OK
-        );
+        start_loop(h);
         assert_eq!(
             capsule_mpc_set_disturbance_bound(h, 0.0),
             CAPSULE_MPC_ERR_LOOP_RUNNING
@@ -101,20 +110,9 @@ fn set_timing_refuses_beyond_the_proven_range() {
         }
         assert_eq!(capsule_mpc_set_timing(h, 0.025, 0.005), CAPSULE_MPC_OK);
         assert_eq!(capsule_mpc_set_timing(h, 0.02, 0.0), CAPSULE_MPC_OK);
-        assert_eq!(
-            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
-            CAPSULE_MPC_OK
-        );
+        let mut samples = start_loop(h);
         let mut grads = [0.0; 256];
-        let (mut samples, mut status) = (0u32, 0i32);
-        assert_eq!(
-            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
-            CAPSULE_MPC_OK
-        );
-        assert_eq!(
-            capsule_mpc_next_actuation(h, 0.02, grads.as_mut_ptr(), 256, &mut samples, &mut status),
-            CAPSULE_MPC_OK
-        );
+        let mut status = 0i32;
         assert_eq!(
             capsule_mpc_set_timing(h, 0.03, 0.0),
             CAPSULE_MPC_ERR_LOOP_RUNNING

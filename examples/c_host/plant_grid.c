@@ -25,7 +25,7 @@
  *        the controller is told (capsule_mpc_set_disturbance_bound; a
  *        negative value or none: not called, the config's 5e-4), and
  *        grid = 1 for the 24 targets of +-4 cm in 2 cm steps instead of
- *        the four, and the disturbance model: random (default), drift,
+ *        the four, 2 for four targets off the 1 cm lattice, and the disturbance model: random (default), drift,
  *        constant or none; jitter = 1: each tracking phase 10-30 ms long
  *        (seeded), and lose_every = n > 0: every n-th frame lost.
  * Prints one row per sampling and plant; exit status 0 only when every
@@ -63,6 +63,9 @@ static const double G[NCAP] = {173.24840764331208, 173.24840764331208};
 static const double B[NCAP] = {134.71337579617835, 16.839171974522294};
 
 static const double FOUR_TARGETS[4][NCAP] = {{0.02, 0.03}, {0.02, -0.01}, {-0.01, 0.02}, {0.03, 0.01}};
+/* Off the tables' 1 cm lattice (docs/scripts/off_lattice_plants.py's). */
+static const double OFF_LATTICE_TARGETS[4][NCAP] = {
+    {0.025, -0.015}, {-0.033, 0.017}, {0.012, 0.036}, {-0.007, -0.024}};
 
 struct plant_factors {
     const char *name;
@@ -292,7 +295,7 @@ int main(int argc, char **argv) {
     }
     double targets[NTARGETS_MAX][NCAP];
     int ntargets = 0;
-    if (grid) {
+    if (grid == 1) {
         for (int a = -2; a <= 2; a++)
             for (int b = -2; b <= 2; b++)
                 if (a != 0 || b != 0) {
@@ -301,13 +304,14 @@ int main(int argc, char **argv) {
                     ntargets++;
                 }
     } else {
+        const double(*four)[NCAP] = grid == 2 ? OFF_LATTICE_TARGETS : FOUR_TARGETS;
         for (; ntargets < 4; ntargets++) {
-            targets[ntargets][0] = FOUR_TARGETS[ntargets][0];
-            targets[ntargets][1] = FOUR_TARGETS[ntargets][1];
+            targets[ntargets][0] = four[ntargets][0];
+            targets[ntargets][1] = four[ntargets][1];
         }
     }
     if (seeds < 1 || seeds * ntargets > MAX_RUNS || !(duration_s > 0.0)) {
-        fprintf(stderr, "usage: plant_grid [seeds 1-%d] [duration_s > 0] [told_disturbance_si] [grid 0|1]\n",
+        fprintf(stderr, "usage: plant_grid [seeds 1-%d] [duration_s > 0] [told_disturbance_si] [grid 0|1|2]\n",
                 MAX_RUNS / ntargets);
         return 2;
     }

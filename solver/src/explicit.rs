@@ -116,12 +116,6 @@ impl<'t, 'a> ExplicitSample<'t, 'a> {
         self.tables
             .record_f64s(self.at, l.cost_hessian(), r * l.nx, out)
     }
-    #[inline(always)]
-    pub fn cost_hessian(&self, r: usize, c: usize) -> f64 {
-        let l = self.tables.explicit_layout;
-        self.tables
-            .record_f64(self.at, l.cost_hessian(), r * l.nx + c)
-    }
     /// Active set of the solution at zero deviation (-1, 0, +1).
     pub fn active<const N: usize>(&self) -> [i8; N] {
         let base = self.tables.explicit_layout.active();
