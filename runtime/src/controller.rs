@@ -27,6 +27,7 @@ mod stall;
 mod state;
 mod station;
 mod status;
+mod third_combination;
 mod tracking;
 
 pub use braking::braking_gradient;
@@ -103,6 +104,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 mean_gain: mean_gradient_gain::<S, NX, K>(),
                 station: StationKeeper::new(&capsule_drags::<S, NX, K>()),
                 hold_frames: HoldFrames::new(),
+                third_direction: [0.0; NX],
+                third_frames: HoldFrames::new(),
             },
         };
         // What the hold can stop after a shot depends on the sampling
@@ -345,6 +348,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         self.sup.recovering = false;
         self.sup.off_model_confirm_exits = 0;
         self.sup.drift_exits = 0;
+        self.sup.third_exits = 0;
         self.apply_leg(&x, &leg);
         self.restart_factor_window();
         self.restart_plan();

@@ -102,6 +102,9 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// Whether a refined plan that does not settle within the horizon
     /// looks first for a shot from the stored plan tail (`Solver::set_tail_shots`).
     fn set_tail_shots(&mut self, on: bool);
+    /// Asks the next `solve` for a shot of at least `samples`
+    /// (`Solver::want_shot`).
+    fn want_shot(&mut self, samples: usize);
     /// Whether the explicit tier answers from the model state similar to
     /// the capsules' (`Solver::set_explicit_similarity`).
     fn set_explicit_similarity(&mut self, on: bool);
@@ -222,6 +225,9 @@ impl<
     }
     fn set_tail_shots(&mut self, on: bool) {
         Solver::set_tail_shots(self, on)
+    }
+    fn want_shot(&mut self, samples: usize) {
+        Solver::want_shot(self, samples)
     }
     fn set_explicit_similarity(&mut self, on: bool) {
         Solver::set_explicit_similarity(self, on)

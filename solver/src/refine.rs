@@ -84,6 +84,9 @@ pub struct Solver<S, const M: usize, const NX: usize, const N: usize, const K: u
     /// looks first for a shot from the stored plan tail, as long as the
     /// tail takes to settle (see `acquire_shot`).
     tail_shots: bool,
+    /// Shot length the next `solve` looks for at least (`want_shot`; 0:
+    /// only where the refined plan leaves the band).
+    shot_wanted_samples: usize,
     spec: PhantomData<S>,
 }
 
@@ -147,6 +150,7 @@ impl<
             explicit_similar: false,
             similarity: Similarity::IDENTITY,
             tail_shots: false,
+            shot_wanted_samples: 0,
             spec: PhantomData,
         }
     }
@@ -318,6 +322,14 @@ impl<
         self.explicit_similar = on;
     }
 
+    /// Asks the next `solve` for a shot of at least `samples` (then
+    /// shortened) even where the refined plan stays in the settle band:
+    /// inside the band the refinement's plans barely move the capsules, and
+    /// three capsules' third combination needs a manoeuvre out of it.
+    pub fn want_shot(&mut self, samples: usize) {
+        self.shot_wanted_samples = samples.min(K);
+    }
+
     /// Whether `solve` looks for minimum-time shots; off drops the shot.
     pub fn set_shooting(&mut self, on: bool) {
         self.shooting = on;
@@ -373,6 +385,7 @@ impl<
     /// Refines the plan from relative state `e = x - x_target`.
     pub fn solve(&mut self, e: &[f64; NX]) -> SolveReport {
         let shooting = self.shooting;
+        let wanted_samples = core::mem::take(&mut self.shot_wanted_samples);
         if shooting && self.has_plan && self.shot_samples > 0 {
             if let Some(report) = self.reshoot(e) {
                 return report;
@@ -381,7 +394,7 @@ impl<
         let mut report = self.solve_refined(e);
         self.shooter.charge_refinement();
         if shooting && report.status != SolveStatus::OutOfRange {
-            self.acquire_shot(e, &mut report);
+            self.acquire_shot(e, &mut report, wanted_samples);
         }
         report
     }

@@ -89,10 +89,15 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && self.centre_stops_near(e)
                 && can_stop(HOLD_STOP_SPREAD_M, rate_std)
         };
-        let holding = holding && !(was && self.hold_drifts_out());
+        let drifts = was && holding && self.hold_drifts_out();
+        let walks = was && holding && !drifts && self.hold_walks_out_third();
+        let holding = holding && !drifts && !walks;
         if !was && holding {
             self.law.station.start();
             self.law.hold_frames.clear();
+            self.start_third_frames();
+            // A shot asked for on leaving an earlier hold is void here.
+            self.solver.want_shot(0);
             // The end game's progress restarts when the hold ends.
             self.forget_stall();
         }
@@ -102,6 +107,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             }
             // Re-plan from the tables, not from the plan before the hold.
             self.solver.reset();
+            if walks {
+                // Inside the band the refinement's plans barely move the
+                // third combination: a shot does.
+                self.solver.want_shot(K);
+            }
             self.law.planned_phase_samples = self.settings.max_actuation_samples;
             self.update_schedule();
         }
@@ -218,8 +228,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             *pi = z[i] - self.sup.target[2 * i];
         }
         let xi = self.law.station.along_direction(&p[..NX / 2]);
+        let zeta = self.along_third(&p[..NX / 2]);
         let t_s = self.law.station.held_s();
         self.law.hold_frames.push(t_s, xi);
+        self.law.third_frames.push(t_s, zeta);
     }
 
     /// Whether the hold is left for the relative drift its frames show:

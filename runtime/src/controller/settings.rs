@@ -285,6 +285,19 @@ pub const HOLD_DRIFT_SPREAD_M: f64 = 2.0e-3;
 pub const HOLD_DRIFT_RATE_SIGMAS: f64 = 2.0;
 /// Holds left for the frames' drift per target.
 pub const HOLD_DRIFT_EXITS: u32 = 1;
+/// Frames of hold through which three capsules' third combination is
+/// fitted before the hold may be left for its walk, s (see
+/// `third_combination`).
+pub const HOLD_THIRD_FIT_S: f64 = 1.6;
+/// How far ahead the third combination's line is extrapolated, s.
+pub const HOLD_THIRD_HORIZON_S: f64 = 3.0;
+/// How far along the third combination the capsules may walk for the hold
+/// to go on, m (a unit direction: a capsule's share is at most this).
+pub const HOLD_THIRD_SPREAD_M: f64 = 1.0e-3;
+/// Standard deviations of the line's rate taken toward zero.
+pub const HOLD_THIRD_RATE_SIGMAS: f64 = 3.0;
+/// Holds left for the third combination's walk per target.
+pub const HOLD_THIRD_EXITS: u32 = 1;
 /// Fewest frames a drift line is fitted through.
 pub const HOLD_DRIFT_MIN_FRAMES: usize = 8;
 /// The hold's entry test gives the estimated relative rate this many of

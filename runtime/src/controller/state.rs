@@ -156,6 +156,9 @@ pub(super) struct Supervision<const NX: usize> {
     /// Holds left for the frames' relative drift since the target was set
     /// (see `Controller::hold_drifts_out`).
     pub drift_exits: u32,
+    /// Holds left for the third combination's walk since the target was
+    /// set (see `third_combination`).
+    pub third_exits: u32,
 }
 
 impl<const NX: usize> Supervision<NX> {
@@ -171,6 +174,7 @@ impl<const NX: usize> Supervision<NX> {
             stall_clock_s: 0.0,
             off_model_confirm_exits: 0,
             drift_exits: 0,
+            third_exits: 0,
         }
     }
 
@@ -201,4 +205,8 @@ pub(super) struct LawMemory<const NX: usize> {
     pub station: StationKeeper<NX>,
     /// The hold's frames along the drag direction (see `hold_frames`).
     pub hold_frames: HoldFrames,
+    /// Three capsules' third combination, set at hold entry (zero: none;
+    /// see `third_combination`), and the hold's frames along it.
+    pub third_direction: [f64; NX],
+    pub third_frames: HoldFrames,
 }

@@ -177,10 +177,17 @@ impl<
     /// After a refinement: where the refined plan settles (in the band from
     /// some sample to its end), look for a shot that arrives earlier,
     /// walking the length down one sample at a time.
-    pub(super) fn acquire_shot(&mut self, e: &[f64; NX], report: &mut SolveReport) {
+    /// At least `wanted_samples` long where asked (`want_shot`).
+    pub(super) fn acquire_shot(
+        &mut self,
+        e: &[f64; NX],
+        report: &mut SolveReport,
+        wanted_samples: usize,
+    ) {
         let settle = self
             .shooter
-            .settle_sample::<S>(e, &self.plan, &self.schedule, &self.scales);
+            .settle_sample::<S>(e, &self.plan, &self.schedule, &self.scales)
+            .max(wanted_samples);
         if settle == 0 {
             return;
         }

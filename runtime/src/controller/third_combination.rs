@@ -1,0 +1,141 @@
+//! Three capsules' third combination in the hold. Near rest one gradient
+//! accelerates capsule i by g_i u and the station-keeping dither acts
+//! through drag along b_i g_i^2 (see `station`): of three capsules'
+//! positions the hold moves two combinations, and the third, orthogonal
+//! to both, only drifts. What an arrival leaves in it (the estimate's
+//! speed error before the last open-loop phase, a few tenths of a mm/s)
+//! and the disturbance walk the capsules out of the band within seconds;
+//! only the dither's speed-dependent drag damps it, at about 0.2 /s. A
+//! line through the hold's raw frames along that combination tells the
+//! walk; where even its optimistic end leaves the band within
+//! `HOLD_THIRD_HORIZON_S`, the hold is left, once per target, for a
+//! manoeuvre while the capsules are still near their targets.
+
+use super::braking::capsule_gain_and_drag;
+use super::settings::*;
+use super::Controller;
+use capsule_mpc_solver::*;
+
+/// The third combination's unit direction for three capsules with gains
+/// `gain` and drag coefficients `drag` (first three entries): orthogonal
+/// to the gradient's `g_i` and the dither's `b_i g_i^2`. Zero for any
+/// other number of capsules, or where the two do not span a plane.
+pub fn third_direction<const NX: usize>(gain: &[f64; NX], drag: &[f64; NX]) -> [f64; NX] {
+    let mut out = [0.0; NX];
+    if NX / 2 != 3 {
+        return out;
+    }
+    let a = [gain[0], gain[1], gain[2]];
+    let b = [
+        drag[0] * gain[0] * gain[0],
+        drag[1] * gain[1] * gain[1],
+        drag[2] * gain[2] * gain[2],
+    ];
+    let c = [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ];
+    let norm = libm::sqrt(c.iter().map(|x| x * x).sum::<f64>());
+    let scale = libm::sqrt(a.iter().map(|x| x * x).sum::<f64>())
+        * libm::sqrt(b.iter().map(|x| x * x).sum::<f64>());
+    // Nearly parallel (capsules with one drag): no third combination apart
+    // from the dither's own, which `station` already holds.
+    if !(norm.is_finite() && norm > 1e-6 * scale) {
+        return out;
+    }
+    for (o, x) in out.iter_mut().zip(c) {
+        *o = x / norm;
+    }
+    out
+}
+
+impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
+    /// At hold entry: the third combination with the factors in use, and
+    /// its frames forgotten.
+    pub(super) fn start_third_frames(&mut self) {
+        let mut gain = [0.0; NX];
+        let mut drag = [0.0; NX];
+        for i in 0..NX / 2 {
+            let (g, b) = capsule_gain_and_drag::<S, NX, K>(i);
+            let f = self.est.applied_scales[i];
+            gain[i] = g * f[0];
+            drag[i] = b * f[1];
+        }
+        self.law.third_direction = third_direction(&gain, &drag);
+        self.law.third_frames.clear();
+    }
+
+    /// The capsules' positions `p` (relative to their targets, m) along
+    /// the third combination, m.
+    pub(super) fn along_third(&self, p: &[f64]) -> f64 {
+        self.law
+            .third_direction
+            .iter()
+            .zip(p)
+            .take(NX / 2)
+            .map(|(d, x)| d * x)
+            .sum()
+    }
+
+    /// Whether the hold is left for the third combination's walk: three
+    /// capsules under the scanner cycle (ideal sampling knows the state)
+    /// with shots on (the manoeuvre is a shot), judged once per hold after
+    /// `HOLD_THIRD_FIT_S` in it, at most `HOLD_THIRD_EXITS` times per
+    /// target, once the learned factors differ from the told ones (on the
+    /// model a drifting disturbance's swings, which reverse, set off
+    /// exits that cost station keeping: docs/decisions.md). Left when the
+    /// line through the frames, its rate taken `HOLD_THIRD_RATE_SIGMAS`
+    /// deviations nearer zero, ends beyond `HOLD_THIRD_SPREAD_M` within
+    /// `HOLD_THIRD_HORIZON_S`.
+    pub(super) fn hold_walks_out_third(&mut self) -> bool {
+        if self.settings.sampling == Sampling::Ideal
+            || self.law.third_direction.iter().all(|&d| d == 0.0)
+            || self.sup.third_exits >= HOLD_THIRD_EXITS
+            || self.law.third_frames.judged
+            || self.law.station.held_s() < HOLD_THIRD_FIT_S
+            || !self.shots_on()
+            || !self.factors_differ_from_told()
+        {
+            return false;
+        }
+        self.law.third_frames.judged = true;
+        // A unit direction: the coordinate's noise is a frame's.
+        let Some(line) = self.law.third_frames.line(self.settings.position_noise_m) else {
+            return false;
+        };
+        let slack = HOLD_THIRD_RATE_SIGMAS * line.rate_std;
+        let rate = libm::copysign((libm::fabs(line.rate) - slack).max(0.0), line.rate);
+        let walks_out =
+            libm::fabs(line.coordinate + rate * HOLD_THIRD_HORIZON_S) > HOLD_THIRD_SPREAD_M;
+        if walks_out {
+            self.sup.third_exits += 1;
+        }
+        walks_out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_third_direction_is_what_neither_the_gradient_nor_the_dither_moves() {
+        let gain = [173.0, 160.0, 180.0, 0.0, 0.0, 0.0];
+        let drag = [135.0, 43.0, 17.0, 0.0, 0.0, 0.0];
+        let c = third_direction(&gain, &drag);
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).take(3).map(|(x, y)| x * y).sum::<f64>();
+        let dither: [f64; 3] = core::array::from_fn(|i| drag[i] * gain[i] * gain[i]);
+        assert!(dot(&c, &gain).abs() < 1e-9 * 173.0);
+        assert!(dot(&c, &dither).abs() < 1e-9 * 135.0 * 173.0 * 173.0);
+        assert!((dot(&c, &c) - 1.0).abs() < 1e-12);
+        // One gain and one drag for all: the dither's direction is the
+        // gradient's.
+        assert_eq!(third_direction(&[173.0; 6], &[40.0; 6]), [0.0; 6]);
+        // Two capsules have no third combination.
+        assert_eq!(
+            third_direction(&[1.0, 2.0, 0.0, 0.0], &[3.0, 1.0, 0.0, 0.0]),
+            [0.0; 4]
+        );
+    }
+}
