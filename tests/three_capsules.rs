@@ -19,6 +19,10 @@ fn cm(v: &[f64]) -> Vec<f64> {
 /// bounds up to 3.7 s) and the end game's re-plans.
 const RUN_S: f64 = 8.0;
 
+/// Settle times lie on the simulator's 1 ms grid, summed in floating point:
+/// a settle of exactly twice the bound may read a few 1e-15 s above it.
+const SETTLE_ROUNDING_S: f64 = 1e-9;
+
 /// One `RUN_S` run of the three-capsule preset from rest at the origin to
 /// `target_cm` (at rest); with `seed`, the paper's random disturbance and
 /// that seed, else the default seed and no disturbance.
@@ -306,7 +310,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
                     .unwrap_or(f64::INFINITY);
                 match m.settle_time_s {
                     Some(s) => {
-                        if s <= 2.0 * bound_s {
+                        if s <= 2.0 * bound_s + SETTLE_ROUNDING_S {
                             within_2x += 1;
                         }
                         settled.push((s, label));
