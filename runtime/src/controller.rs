@@ -157,6 +157,11 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// fallback).
     fn restart_plan(&mut self) {
         self.solver.reset();
+        // Whatever the hold's frames and a shot asked for on leaving it
+        // referred to is gone.
+        self.solver.want_shot(0);
+        self.law.hold_frames.clear();
+        self.law.third_frames.clear();
         self.law.applied_samples = 0;
         self.law.last_cost = f64::INFINITY;
         self.law.station.forget();
@@ -462,6 +467,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     fn brake_step(&mut self, x: &[f64; NX], out: &mut CycleOutput<K>) {
         out.gradients_t_per_m[0] = braking_gradient::<S, NX, K>(x);
         self.solver.reset();
+        self.solver.want_shot(0);
         self.law.applied_samples = 0;
     }
 

@@ -102,7 +102,7 @@ pub trait PlanSolver<const NX: usize, const K: usize>: Sized {
     /// Whether a refined plan that does not settle within the horizon
     /// looks first for a shot from the stored plan tail (`Solver::set_tail_shots`).
     fn set_tail_shots(&mut self, on: bool);
-    /// Asks the next `solve` for a shot of at least `samples`
+    /// Asks the next `solve` for a shot searched from `samples` down
     /// (`Solver::want_shot`).
     fn want_shot(&mut self, samples: usize);
     /// Whether the explicit tier answers from the model state similar to

@@ -84,7 +84,7 @@ pub struct Solver<S, const M: usize, const NX: usize, const N: usize, const K: u
     /// looks first for a shot from the stored plan tail, as long as the
     /// tail takes to settle (see `acquire_shot`).
     tail_shots: bool,
-    /// Shot length the next `solve` looks for at least (`want_shot`; 0:
+    /// Shot length the next `solve` searches down from (`want_shot`; 0:
     /// only where the refined plan leaves the band).
     shot_wanted_samples: usize,
     spec: PhantomData<S>,
@@ -322,8 +322,9 @@ impl<
         self.explicit_similar = on;
     }
 
-    /// Asks the next `solve` for a shot of at least `samples` (then
-    /// shortened) even where the refined plan stays in the settle band:
+    /// Asks the next `solve` for a shot searched from `samples` down (the
+    /// shortest that converges) even where the refined plan stays in the
+    /// settle band; 0 withdraws the request:
     /// inside the band the refinement's plans barely move the capsules, and
     /// three capsules' third combination needs a manoeuvre out of it.
     pub fn want_shot(&mut self, samples: usize) {

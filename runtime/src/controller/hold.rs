@@ -109,7 +109,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.solver.reset();
             if walks {
                 // Inside the band the refinement's plans barely move the
-                // third combination: a shot does.
+                // third combination: a shot does (searched from the plan's
+                // length down).
                 self.solver.want_shot(K);
             }
             self.law.planned_phase_samples = self.settings.max_actuation_samples;
@@ -228,10 +229,9 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             *pi = z[i] - self.sup.target[2 * i];
         }
         let xi = self.law.station.along_direction(&p[..NX / 2]);
-        let zeta = self.along_third(&p[..NX / 2]);
         let t_s = self.law.station.held_s();
         self.law.hold_frames.push(t_s, xi);
-        self.law.third_frames.push(t_s, zeta);
+        self.log_third_frame(t_s, &p[..NX / 2]);
     }
 
     /// Whether the hold is left for the relative drift its frames show:

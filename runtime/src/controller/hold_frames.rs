@@ -1,25 +1,26 @@
-//! The hold's relative drift, told from the raw frames. An arrival that
-//! keeps a relative speed of most of a mm/s drifts apart in the hold, which
-//! brakes it at 1-2e-4 m/s^2 (see `station`) to a stop 1.5-2 mm apart, at
-//! the band's edge, where the disturbance carries a capsule out seconds
-//! later; the manoeuvre that follows then starts the settle again late.
-//! The filters' relative speed near rest can be off by the size of that
-//! speed (0.2 mm frames tens of ms apart, and a process noise that lets
-//! them follow manoeuvres), so the hold's entry test cannot see it. A line
-//! through the hold's first `HOLD_DRIFT_FIT_S` of raw frames along the
-//! drag direction tells the drift to about 0.3 mm/s; where even its
-//! optimistic end leaves the capsules beyond `HOLD_DRIFT_SPREAD_M`, the
-//! hold is left at once, and the shot or plan that follows re-enters it
-//! about 0.2 s later instead of seconds.
+//! The hold's drift along one coordinate, told from the raw frames. An
+//! arrival that keeps a relative speed of most of a mm/s drifts apart in
+//! the hold, which brakes it at 1-2e-4 m/s^2 along the drag direction (see
+//! `station`) to a stop 1.5-2 mm apart, at the band's edge, and not at all
+//! along three capsules' third combination (see `third_combination`);
+//! the disturbance then carries a capsule out seconds later, and the
+//! manoeuvre that follows starts the settle again late. The filters'
+//! relative speed near rest can be off by the size of that speed (0.2 mm
+//! frames tens of ms apart, and a process noise that lets them follow
+//! manoeuvres), so the hold's entry test cannot see it. A line through the
+//! hold's first second or so of raw frames along the coordinate tells the
+//! drift to about 0.1-0.3 mm/s; where even its optimistic end leaves the
+//! band, the hold is left at once, and the shot or plan that follows
+//! re-enters it about 0.2 s later instead of seconds.
 
-use super::settings::HOLD_DRIFT_MIN_FRAMES;
+use super::settings::HOLD_LINE_MIN_FRAMES;
 
 /// Frames kept since the hold was entered: every frame of the
-/// `HOLD_DRIFT_FIT_S` judged, for cycles of one 20 ms sample or longer
-/// (with shorter ones, the latest).
+/// `HOLD_DRIFT_FIT_S` and `HOLD_THIRD_FIT_S` judged, for cycles of one
+/// 20 ms sample or longer (with shorter ones, the latest).
 pub const HOLD_FRAME_LOG: usize = 40;
 
-/// The hold's frames along the drag direction: (time since entry s,
+/// The hold's frames along one coordinate: (time since entry s,
 /// coordinate), oldest overwritten first.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HoldFrames {
@@ -61,8 +62,22 @@ impl HoldFrames {
         self.count += 1;
     }
 
+    /// Whether the log holds `fit_s` of frames, or as many as it keeps.
+    pub fn covers(&self, fit_s: f64) -> bool {
+        let kept = self.count.min(HOLD_FRAME_LOG);
+        if kept == HOLD_FRAME_LOG {
+            return true;
+        }
+        let (mut first, mut last) = (f64::INFINITY, f64::NEG_INFINITY);
+        for f in self.frames.iter().take(kept) {
+            first = first.min(f[0]);
+            last = last.max(f[0]);
+        }
+        kept > 1 && last - first >= fit_s
+    }
+
     /// Least-squares line through the logged frames, each with standard
-    /// deviation `xi_std`; None with fewer than `HOLD_DRIFT_MIN_FRAMES` or
+    /// deviation `xi_std`; None with fewer than `HOLD_LINE_MIN_FRAMES` or
     /// no time spread.
     pub fn line(&self, xi_std: f64) -> Option<DriftLine> {
         let kept = self.count.min(HOLD_FRAME_LOG);
@@ -73,7 +88,7 @@ impl HoldFrames {
             sx += f[1];
             last_t = last_t.max(f[0]);
         }
-        if n < HOLD_DRIFT_MIN_FRAMES as f64 {
+        if n < HOLD_LINE_MIN_FRAMES as f64 {
             return None;
         }
         let (tm, xm) = (st / n, sx / n);
@@ -101,7 +116,7 @@ mod tests {
     #[test]
     fn the_line_through_the_frames_is_their_least_squares_drift() {
         let mut log = HoldFrames::new();
-        for k in 0..HOLD_DRIFT_MIN_FRAMES - 1 {
+        for k in 0..HOLD_LINE_MIN_FRAMES - 1 {
             log.push(0.04 * k as f64, 1.0e-3 - 0.5e-3 * 0.04 * k as f64);
         }
         assert!(log.line(0.2e-3).is_none(), "too few frames for a line");

@@ -287,19 +287,28 @@ pub const HOLD_DRIFT_RATE_SIGMAS: f64 = 2.0;
 pub const HOLD_DRIFT_EXITS: u32 = 1;
 /// Frames of hold through which three capsules' third combination is
 /// fitted before the hold may be left for its walk, s (see
-/// `third_combination`).
+/// `third_combination`): the rate to about 0.07 mm/s on 0.2 mm frames
+/// 40 ms apart. At 1.0 s the traced 0.28 mm/s walk was within two
+/// deviations of rest (docs/decisions.md).
 pub const HOLD_THIRD_FIT_S: f64 = 1.6;
 /// How far ahead the third combination's line is extrapolated, s.
 pub const HOLD_THIRD_HORIZON_S: f64 = 3.0;
 /// How far along the third combination the capsules may walk for the hold
 /// to go on, m (a unit direction: a capsule's share is at most this).
+/// 0.8 mm and 1.3 mm traded unsettled runs against medians
+/// (docs/decisions.md).
 pub const HOLD_THIRD_SPREAD_M: f64 = 1.0e-3;
-/// Standard deviations of the line's rate taken toward zero.
+/// Standard deviations of the line's rate taken toward zero: two left
+/// holds on a drifting disturbance's swings, which reverse
+/// (docs/decisions.md).
 pub const HOLD_THIRD_RATE_SIGMAS: f64 = 3.0;
 /// Holds left for the third combination's walk per target.
 pub const HOLD_THIRD_EXITS: u32 = 1;
-/// Fewest frames a drift line is fitted through.
-pub const HOLD_DRIFT_MIN_FRAMES: usize = 8;
+/// How far the third combination's unit direction may turn, as the
+/// learned factors move, before its frames are fitted afresh.
+pub const HOLD_THIRD_DIRECTION_TOLERANCE: f64 = 0.02;
+/// Fewest frames a hold's line is fitted through (`hold_frames`).
+pub const HOLD_LINE_MIN_FRAMES: usize = 8;
 /// The hold's entry test gives the estimated relative rate this many of
 /// its standard deviations (see `Controller::update_hold`).
 pub const HOLD_ENTRY_RATE_SIGMAS: f64 = 1.0;

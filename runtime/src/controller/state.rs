@@ -205,8 +205,9 @@ pub(super) struct LawMemory<const NX: usize> {
     pub station: StationKeeper<NX>,
     /// The hold's frames along the drag direction (see `hold_frames`).
     pub hold_frames: HoldFrames,
-    /// Three capsules' third combination, set at hold entry (zero: none;
-    /// see `third_combination`), and the hold's frames along it.
+    /// Three capsules' third combination with the factors in use (zero:
+    /// none; see `third_combination`).
     pub third_direction: [f64; NX],
+    /// The hold's frames along it.
     pub third_frames: HoldFrames,
 }

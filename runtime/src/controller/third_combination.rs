@@ -16,84 +16,27 @@ use super::settings::*;
 use super::Controller;
 use capsule_mpc_solver::*;
 
-/// The third combination's unit direction for three capsules with gains
-/// `gain` and drag coefficients `drag` (first three entries): orthogonal
-/// to the gradient's `g_i` and the dither's `b_i g_i^2`. Zero for any
-/// other number of capsules, or where the two do not span a plane.
-pub fn third_direction<const NX: usize>(gain: &[f64; NX], drag: &[f64; NX]) -> [f64; NX] {
-    let mut out = [0.0; NX];
-    if NX / 2 != 3 {
-        return out;
-    }
-    let a = [gain[0], gain[1], gain[2]];
-    let b = [
-        drag[0] * gain[0] * gain[0],
-        drag[1] * gain[1] * gain[1],
-        drag[2] * gain[2] * gain[2],
-    ];
-    let c = [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ];
-    let norm = libm::sqrt(c.iter().map(|x| x * x).sum::<f64>());
-    let scale = libm::sqrt(a.iter().map(|x| x * x).sum::<f64>())
-        * libm::sqrt(b.iter().map(|x| x * x).sum::<f64>());
-    // Nearly parallel (capsules with one drag): no third combination apart
-    // from the dither's own, which `station` already holds.
-    if !(norm.is_finite() && norm > 1e-6 * scale) {
-        return out;
-    }
-    for (o, x) in out.iter_mut().zip(c) {
-        *o = x / norm;
-    }
-    out
-}
+/// Below this sine of the angle between the gradient's and the dither's
+/// directions the two do not span a plane (capsules with one drag).
+const PARALLEL_SINE: f64 = 1e-6;
 
 impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K> {
-    /// At hold entry: the third combination with the factors in use, and
-    /// its frames forgotten.
-    pub(super) fn start_third_frames(&mut self) {
-        let mut gain = [0.0; NX];
-        let mut drag = [0.0; NX];
-        for i in 0..NX / 2 {
-            let (g, b) = capsule_gain_and_drag::<S, NX, K>(i);
-            let f = self.est.applied_scales[i];
-            gain[i] = g * f[0];
-            drag[i] = b * f[1];
-        }
-        self.law.third_direction = third_direction(&gain, &drag);
-        self.law.third_frames.clear();
-    }
-
-    /// The capsules' positions `p` (relative to their targets, m) along
-    /// the third combination, m.
-    pub(super) fn along_third(&self, p: &[f64]) -> f64 {
-        self.law
-            .third_direction
-            .iter()
-            .zip(p)
-            .take(NX / 2)
-            .map(|(d, x)| d * x)
-            .sum()
-    }
-
     /// Whether the hold is left for the third combination's walk: three
     /// capsules under the scanner cycle (ideal sampling knows the state)
-    /// with shots on (the manoeuvre is a shot), judged once per hold after
-    /// `HOLD_THIRD_FIT_S` in it, at most `HOLD_THIRD_EXITS` times per
-    /// target, once the learned factors differ from the told ones (on the
-    /// model a drifting disturbance's swings, which reverse, set off
-    /// exits that cost station keeping: docs/decisions.md). Left when the
-    /// line through the frames, its rate taken `HOLD_THIRD_RATE_SIGMAS`
-    /// deviations nearer zero, ends beyond `HOLD_THIRD_SPREAD_M` within
-    /// `HOLD_THIRD_HORIZON_S`.
+    /// with shots on (the manoeuvre is a shot), judged once per hold when
+    /// its frames along the combination span `HOLD_THIRD_FIT_S`, at most
+    /// `HOLD_THIRD_EXITS` times per target, once the learned factors
+    /// differ from the told ones (on the model a drifting disturbance's
+    /// swings, which reverse, set off exits that cost station keeping:
+    /// docs/decisions.md). Left when the line through the frames, its rate
+    /// taken `HOLD_THIRD_RATE_SIGMAS` deviations nearer zero, ends beyond
+    /// `HOLD_THIRD_SPREAD_M` within `HOLD_THIRD_HORIZON_S`.
     pub(super) fn hold_walks_out_third(&mut self) -> bool {
         if self.settings.sampling == Sampling::Ideal
             || self.law.third_direction.iter().all(|&d| d == 0.0)
             || self.sup.third_exits >= HOLD_THIRD_EXITS
             || self.law.third_frames.judged
-            || self.law.station.held_s() < HOLD_THIRD_FIT_S
+            || !self.law.third_frames.covers(HOLD_THIRD_FIT_S)
             || !self.shots_on()
             || !self.factors_differ_from_told()
         {
@@ -113,6 +56,83 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         }
         walks_out
     }
+
+    /// Logs the frame with positions `p` (relative to the targets, m) at
+    /// `t_s` since hold entry along the third combination of the factors
+    /// now in use; when the factors have turned it by more than
+    /// `HOLD_THIRD_DIRECTION_TOLERANCE`, the frames logged along the old
+    /// one are dropped first.
+    pub(super) fn log_third_frame(&mut self, t_s: f64, p: &[f64]) {
+        let direction = self.third_direction_now();
+        let turned = direction
+            .iter()
+            .zip(&self.law.third_direction)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>();
+        if turned > HOLD_THIRD_DIRECTION_TOLERANCE * HOLD_THIRD_DIRECTION_TOLERANCE {
+            self.law.third_direction = direction;
+            self.law.third_frames.clear();
+        }
+        let zeta = direction
+            .iter()
+            .zip(p)
+            .take(NX / 2)
+            .map(|(d, x)| d * x)
+            .sum();
+        self.law.third_frames.push(t_s, zeta);
+    }
+
+    /// At hold entry: the combination with the factors in use, and its
+    /// frames forgotten.
+    pub(super) fn start_third_frames(&mut self) {
+        self.law.third_direction = self.third_direction_now();
+        self.law.third_frames.clear();
+    }
+
+    /// The third combination with each capsule's gain and drag scaled by
+    /// its factors in use.
+    fn third_direction_now(&self) -> [f64; NX] {
+        let mut gain = [0.0; NX];
+        let mut drag = [0.0; NX];
+        for i in 0..NX / 2 {
+            let (g, b) = capsule_gain_and_drag::<S, NX, K>(i);
+            let f = self.est.applied_scales[i];
+            gain[i] = g * f[0];
+            drag[i] = b * f[1];
+        }
+        third_direction(&gain, &drag)
+    }
+}
+
+/// The third combination's unit direction for three capsules with gains
+/// `gain` and drag coefficients `drag` (first three entries): orthogonal
+/// to the gradient's `g_i` and the dither's `b_i g_i^2`. Zero for any
+/// other number of capsules, or where the two do not span a plane.
+pub fn third_direction<const NX: usize>(gain: &[f64; NX], drag: &[f64; NX]) -> [f64; NX] {
+    let mut out = [0.0; NX];
+    if NX / 2 != 3 {
+        return out;
+    }
+    let a = [gain[0], gain[1], gain[2]];
+    let b: [f64; 3] = core::array::from_fn(|i| drag[i] * gain[i] * gain[i]);
+    let c = [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ];
+    let norm = norm3(&c);
+    // |a x b| = |a| |b| sin(angle).
+    if !(norm.is_finite() && norm > PARALLEL_SINE * norm3(&a) * norm3(&b)) {
+        return out;
+    }
+    for (o, x) in out.iter_mut().zip(c) {
+        *o = x / norm;
+    }
+    out
+}
+
+fn norm3(v: &[f64; 3]) -> f64 {
+    libm::sqrt(v.iter().map(|x| x * x).sum::<f64>())
 }
 
 #[cfg(test)]
@@ -136,6 +156,11 @@ mod tests {
         assert_eq!(
             third_direction(&[1.0, 2.0, 0.0, 0.0], &[3.0, 1.0, 0.0, 0.0]),
             [0.0; 4]
+        );
+        // Non-finite factors give none either.
+        assert_eq!(
+            third_direction(&[f64::NAN, 160.0, 180.0, 0.0, 0.0, 0.0], &drag),
+            [0.0; 6]
         );
     }
 }

@@ -177,7 +177,8 @@ impl<
     /// After a refinement: where the refined plan settles (in the band from
     /// some sample to its end), look for a shot that arrives earlier,
     /// walking the length down one sample at a time.
-    /// At least `wanted_samples` long where asked (`want_shot`).
+    /// Searched from `wanted_samples` down where asked (`want_shot`), even
+    /// when the refined plan stays in the band.
     pub(super) fn acquire_shot(
         &mut self,
         e: &[f64; NX],
