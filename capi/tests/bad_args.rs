@@ -5,8 +5,11 @@ use capsule_mpc_capi::*;
 use core::ffi::c_void;
 use core::ptr::{null, null_mut};
 
+#[path = "common/first_frame.rs"]
+mod first_frame;
 #[path = "common/handle.rs"]
 mod handle;
+use first_frame::aim_at_c_with_a_frame;
 use handle::*;
 
 /// A pointer to a double that is not 8-byte aligned (inside `bytes`).
@@ -595,15 +598,8 @@ fn next_actuation_last_status_estimate_bad_args() {
     let mut grads = [7.0; 256];
     let (mut samples, mut status) = (7u32, 7i32);
     let mut words = [0u64; 64];
+    aim_at_c_with_a_frame(h);
     unsafe {
-        assert_eq!(
-            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
-            CAPSULE_MPC_OK
-        );
-        assert_eq!(
-            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
-            CAPSULE_MPC_OK
-        );
         let before = estimate(h);
         let g = grads.as_mut_ptr();
         assert_eq!(

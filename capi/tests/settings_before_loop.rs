@@ -5,8 +5,11 @@
 
 use capsule_mpc_capi::*;
 
+#[path = "common/first_frame.rs"]
+mod first_frame;
 #[path = "common/handle.rs"]
 mod handle;
+use first_frame::aim_at_c_with_a_frame;
 use handle::*;
 
 /// Starts the loop on `h`: target C, a frame at 0 s, an actuation from
@@ -14,15 +17,8 @@ use handle::*;
 fn start_loop(h: *mut CapsuleMpc) -> u32 {
     let mut grads = [0.0; 256];
     let (mut samples, mut status) = (0u32, 0i32);
+    aim_at_c_with_a_frame(h);
     unsafe {
-        assert_eq!(
-            capsule_mpc_set_target(h, TARGET_C.as_ptr(), 4),
-            CAPSULE_MPC_OK
-        );
-        assert_eq!(
-            capsule_mpc_feed_tracking(h, ORIGIN.as_ptr(), 2, 0.0, 0),
-            CAPSULE_MPC_OK
-        );
         assert_eq!(
             capsule_mpc_next_actuation(h, 0.02, grads.as_mut_ptr(), 256, &mut samples, &mut status),
             CAPSULE_MPC_OK

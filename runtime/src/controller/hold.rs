@@ -96,8 +96,6 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.law.station.start();
             self.law.hold_frames.clear();
             self.start_third_frames();
-            // A shot asked for on leaving an earlier hold is void here.
-            self.solver.want_shot(0);
             // The end game's progress restarts when the hold ends.
             self.forget_stall();
         }
