@@ -90,7 +90,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 && can_stop(HOLD_STOP_SPREAD_M, rate_std)
         };
         let drifts = was && holding && self.hold_drifts_out();
-        let walks = was && holding && !drifts && self.hold_walks_out_third();
+        let walks = was
+            && holding
+            && !drifts
+            && (self.hold_walks_out_third() || self.hold_walked_out_third());
         let holding = holding && !drifts && !walks;
         if !was && holding {
             self.law.station.start();

@@ -80,9 +80,14 @@ impl HoldFrames {
     /// deviation `xi_std`; None with fewer than `HOLD_LINE_MIN_FRAMES` or
     /// no time spread.
     pub fn line(&self, xi_std: f64) -> Option<DriftLine> {
+        self.line_since(f64::NEG_INFINITY, xi_std)
+    }
+
+    /// As [`Self::line`], through the frames logged at `from_s` or later.
+    pub fn line_since(&self, from_s: f64, xi_std: f64) -> Option<DriftLine> {
         let kept = self.count.min(HOLD_FRAME_LOG);
         let (mut n, mut st, mut sx, mut last_t) = (0.0, 0.0, 0.0, f64::NEG_INFINITY);
-        for f in self.frames.iter().take(kept) {
+        for f in self.frames.iter().take(kept).filter(|f| f[0] >= from_s) {
             n += 1.0;
             st += f[0];
             sx += f[1];
@@ -93,7 +98,7 @@ impl HoldFrames {
         }
         let (tm, xm) = (st / n, sx / n);
         let (mut stt, mut stx) = (0.0, 0.0);
-        for f in self.frames.iter().take(kept) {
+        for f in self.frames.iter().take(kept).filter(|f| f[0] >= from_s) {
             stt += (f[0] - tm) * (f[0] - tm);
             stx += (f[0] - tm) * (f[1] - xm);
         }

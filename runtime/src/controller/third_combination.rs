@@ -9,7 +9,9 @@
 //! line through the hold's raw frames along that combination tells the
 //! walk; where even its optimistic end leaves the band within
 //! `HOLD_THIRD_HORIZON_S`, the hold is left, once per target, for a
-//! manoeuvre while the capsules are still near their targets.
+//! manoeuvre while the capsules are still near their targets; and
+//! whenever the walk has carried a capsule to the band's edge, the hold is
+//! left for a shot instead of sitting there.
 
 use super::braking::capsule_gain_and_drag;
 use super::settings::*;
@@ -55,6 +57,42 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.sup.third_exits += 1;
         }
         walks_out
+    }
+
+    /// Whether the hold is left because the third combination has walked
+    /// out: three capsules under the scanner cycle with shots on, after
+    /// `HOLD_THIRD_RECENT_S` in the hold, when the line through that
+    /// latest stretch of frames puts the capsule with the largest share of
+    /// the combination beyond `HOLD_THIRD_OUT_M` by the walk alone. Unlike
+    /// the look above it waits for the walk to reach the band's edge, so a
+    /// drifting disturbance's swings, which reverse inside the band, do
+    /// not set it off, and it is neither gated on the factors nor counted:
+    /// station keeping drifts out again and again over a long hold
+    /// (docs/three-capsules.md), and a capsule at the edge is out of the
+    /// band whether or not the hold is left.
+    pub(super) fn hold_walked_out_third(&mut self) -> bool {
+        if self.settings.sampling == Sampling::Ideal
+            || self.law.third_direction.iter().all(|&d| d == 0.0)
+            || self.law.station.held_s() < HOLD_THIRD_RECENT_S
+            || !self.shots_on()
+        {
+            return false;
+        }
+        let from_s = self.law.station.held_s() - HOLD_THIRD_RECENT_S;
+        let Some(line) = self
+            .law
+            .third_frames
+            .line_since(from_s, self.settings.position_noise_m)
+        else {
+            return false;
+        };
+        let share = self
+            .law
+            .third_direction
+            .iter()
+            .take(NX / 2)
+            .fold(0.0_f64, |m, d| m.max(libm::fabs(*d)));
+        share * libm::fabs(line.coordinate) > HOLD_THIRD_OUT_M
     }
 
     /// Logs the frame with positions `p` (relative to the targets, m) at
