@@ -23,14 +23,33 @@ const RUN_S: f64 = 8.0;
 /// a settle of exactly twice the bound may read a few 1e-15 s above it.
 const SETTLE_ROUNDING_S: f64 = 1e-9;
 
+/// The scanner tests' targets, cm.
+const SCANNER_TARGETS_CM: [[f64; 3]; 10] = [
+    [1.0, 1.0, 1.0],
+    [3.0, 3.0, 3.0],
+    [-3.0, -3.0, -3.0],
+    [3.0, -3.0, 3.0],
+    [-3.0, 3.0, 0.0],
+    [2.0, 0.0, -1.0],
+    [0.0, 2.5, -2.5],
+    [-1.5, 0.5, 2.0],
+    [0.5, -2.0, -0.5],
+    [-2.0, -1.0, 3.0],
+];
+
 /// One `RUN_S` run of the three-capsule preset from rest at the origin to
 /// `target_cm` (at rest); with `seed`, the paper's random disturbance and
 /// that seed, else the default seed and no disturbance.
 fn run_to(target_cm: [f64; 3], sampling: Sampling, seed: Option<u64>) -> Metrics {
+    run_for(target_cm, sampling, seed, RUN_S)
+}
+
+/// As [`run_to`], for `duration_s`.
+fn run_for(target_cm: [f64; 3], sampling: Sampling, seed: Option<u64>, duration_s: f64) -> Metrics {
     let config = three();
     let state: Vec<f64> = target_cm.iter().flat_map(|&p| [p / 100.0, 0.0]).collect();
     let mut opts = RunOptions::new(&config, state, sampling);
-    opts.duration_s = RUN_S;
+    opts.duration_s = duration_s;
     if let Some(seed) = seed {
         let model = Model::from_config(&config);
         opts.seed = seed;
@@ -283,24 +302,12 @@ fn off_grid_targets_settle() {
 /// Asserted: every run settles within 2x.
 #[test]
 fn scanner_sampling_settles_with_noise_and_disturbance() {
-    let targets_cm: [[f64; 3]; 10] = [
-        [1.0, 1.0, 1.0],
-        [3.0, 3.0, 3.0],
-        [-3.0, -3.0, -3.0],
-        [3.0, -3.0, 3.0],
-        [-3.0, 3.0, 0.0],
-        [2.0, 0.0, -1.0],
-        [0.0, 2.5, -2.5],
-        [-1.5, 0.5, 2.0],
-        [0.5, -2.0, -0.5],
-        [-2.0, -1.0, 3.0],
-    ];
     let mut summaries = Vec::new();
     for sampling in [Sampling::Constant, Sampling::Variable] {
         let mut settled = Vec::new();
         let mut never = Vec::new();
         let mut within_2x = 0;
-        for t in targets_cm {
+        for t in SCANNER_TARGETS_CM {
             for seed in 1..=8 {
                 let m = run_to(t, sampling, Some(seed));
                 let label = format!("{t:?} cm seed {seed}");
@@ -336,6 +343,42 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
             sampling.name()
         );
     }
+}
+
+/// Station keeping long after the arrival: under the paper's random
+/// disturbance the third combination (which the hold does not move, see
+/// `third_combination` in the runtime) walks a capsule to the band's edge
+/// again and again, and each time the hold is left for a shot. 20 s runs
+/// to the scanner targets x seeds 1-4, both samplings: from the first
+/// entry to the end of the run every run is in the band at least
+/// `MIN_IN_BAND` of the time. Measured worst 0.956 (constant sampling) and
+/// 0.959 (variable); sitting at the edge instead, 0.889 and 0.886, 24 of
+/// 80 runs below (docs/three-capsules.md).
+#[test]
+fn station_keeping_holds_the_band_over_20_s() {
+    const MIN_IN_BAND: f64 = 0.95;
+    const STATION_RUN_S: f64 = 20.0;
+    let mut low = Vec::new();
+    let mut worst = f64::INFINITY;
+    for sampling in [Sampling::Constant, Sampling::Variable] {
+        for t in SCANNER_TARGETS_CM {
+            for seed in 1..=4 {
+                let m = run_for(t, sampling, Some(seed), STATION_RUN_S);
+                let in_band = m.time_in_band_after_entry.unwrap_or(0.0);
+                worst = worst.min(in_band);
+                if in_band < MIN_IN_BAND {
+                    low.push(format!(
+                        "{} {t:?} cm seed {seed}: {in_band:.3}",
+                        sampling.name()
+                    ));
+                }
+            }
+        }
+    }
+    println!(
+        "M = 3, station keeping over 20 s runs: worst in band {worst:.3} after the first entry"
+    );
+    assert!(low.is_empty(), "below {MIN_IN_BAND} in band: {low:?}");
 }
 
 /// Under variable sampling the first frames choose 1-sample phases and the

@@ -10,10 +10,12 @@
 //! the runtime): an arrival that leaves a walk in it drifts out of the
 //! band seconds later. Asserted: at most `MAX_UNSETTLED` runs unsettled
 //! and the 90th percentile of the settle times (unsettled runs counted as
-//! never) within `P90_BOUND_S`. Measured on these 240 runs: 6 unsettled,
-//! median 2.08 s, 90th percentile 6.96 s; without leaving the hold for the
-//! third combination's walk 9 unsettled, median 1.98 s, 90th percentile
-//! 7.48 s. Printed: every run's conditions and settle time.
+//! never) within `P90_BOUND_S`. Measured on these 240 runs: 4 unsettled,
+//! median 2.08 s, 90th percentile 6.36 s; without leaving the hold once
+//! the walk has reached the band's edge 6 unsettled, 90th percentile
+//! 6.96 s; without leaving it for the walk at all 9 unsettled, median
+//! 1.98 s, 90th percentile 7.48 s. Printed: every run's conditions and
+//! settle time.
 
 use capsule_mpc_generator::config::{Config, DisturbanceKind};
 use capsule_mpc_sim::closed_loop::{run, RunOptions, Sampling};
@@ -27,9 +29,9 @@ const DRAW_SEED: u64 = 326;
 const DURATION_S: f64 = 8.0;
 const REACH_M: f64 = 0.03;
 /// Most runs left unsettled at `DURATION_S`.
-const MAX_UNSETTLED: usize = 8;
+const MAX_UNSETTLED: usize = 6;
 /// Bound on the 90th percentile of the settle times, s.
-const P90_BOUND_S: f64 = 7.25;
+const P90_BOUND_S: f64 = 6.75;
 
 /// One drawn run: what differs from the default options.
 #[derive(Debug)]
