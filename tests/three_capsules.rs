@@ -353,7 +353,7 @@ fn scanner_sampling_settles_with_noise_and_disturbance() {
 /// entry to the end of the run every run is in the band at least
 /// `MIN_IN_BAND` of the time. Measured worst 0.956 (constant sampling) and
 /// 0.959 (variable); sitting at the edge instead, 0.889 and 0.886, 24 of
-/// 80 runs below (docs/three-capsules.md).
+/// 80 runs below (docs/known-limits.md, "Three capsules").
 #[test]
 fn station_keeping_holds_the_band_over_20_s() {
     const MIN_IN_BAND: f64 = 0.95;

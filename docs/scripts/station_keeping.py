@@ -14,12 +14,14 @@ sampling the worst fractions, the runs below 95 %, the median strict
 settle and the three worst runs of the 10 s window.
 
     cargo build --release
-    python3 docs/scripts/station_keeping.py target/release/capsule-mpc [--constant]
+    python3 docs/scripts/station_keeping.py target/release/capsule-mpc [--constant] [--lose-every N]
+
+With `--lose-every N` every Nth tracking frame is lost.
 """
 import sys
 from concurrent.futures import ThreadPoolExecutor
 
-from grid_runs import simulate_args
+from grid_runs import pop_option, simulate_args
 
 CONFIG = "configs/three-capsules.toml"
 TARGETS_CM = [[1, 1, 1], [3, 3, 3], [-3, -3, -3], [3, -3, 3], [-3, 3, 0], [2, 0, -1],
@@ -56,18 +58,22 @@ def window_fraction(report):
     return inside / total
 
 
-def run(binary, job):
+def run(binary, job, extra):
     model, sampling, target_cm, seed = job
     args = ["--config", CONFIG, "--target", ",".join(f"{x / 100},0" for x in target_cm),
             "--sampling", sampling, "--disturbance", "paper", "--disturbance-model", model,
-            "--seed", str(seed), "--duration", str(DURATION_S)]
+            "--seed", str(seed), "--duration", str(DURATION_S)] + extra
     report = simulate_args(binary, args)
     metrics = report["metrics"]
-    return window_fraction(report), metrics["time_in_band_after_entry"], metrics["settle_time_s"]
+    # Never in the band counts as none of the time.
+    whole = metrics["time_in_band_after_entry"] or 0.0
+    return window_fraction(report), whole, metrics["settle_time_s"]
 
 
 def main():
     args = sys.argv[1:]
+    lose_every = pop_option(args, "--lose-every")
+    extra = [] if lose_every is None else ["--lose-every", lose_every]
     models = ["random", "drift"]
     if "--constant" in args:
         args.remove("--constant")
@@ -75,18 +81,18 @@ def main():
     binary = args[0]
     jobs = [(m, s, t, seed) for m in models for s in SAMPLINGS for t in TARGETS_CM for seed in SEEDS]
     with ThreadPoolExecutor(2) as ex:
-        results = list(ex.map(lambda j: run(binary, j), jobs))
+        results = list(ex.map(lambda j: run(binary, j, extra), jobs))
     for model in models:
         for sampling in SAMPLINGS:
             rows = [(f, s, j) for j, (f, _, s) in zip(jobs, results) if j[0] == model and j[1] == sampling]
             judged = sorted(f for f, _, _ in rows if f is not None)
             whole = sorted(w for j, (_, w, _) in zip(jobs, results)
-                           if j[0] == model and j[1] == sampling and w is not None)
+                           if j[0] == model and j[1] == sampling)
             settles = sorted(NEVER_S if s is None else s for _, s, _ in rows)
             print(f"{model} / {sampling}: worst in band {judged[0]:.3f}, "
                   f"{sum(1 for f in judged if f < 0.95)} of {len(rows)} below 95 % "
                   f"({len(rows) - len(judged)} without a full window); whole run after entry "
-                  f"worst {whole[0]:.3f}, {sum(1 for w in whole if w < 0.95)} below 95 %; settle median "
+                  f"worst {whole[0]:.3f}, {sum(1 for w in whole if w < 0.95)} of {len(whole)} below 95 %; settle median "
                   f"{settles[len(settles) // 2]:.2f} s, {settles.count(NEVER_S)} unsettled "
                   f"at {DURATION_S} s")
             for f, s, j in sorted((r for r in rows if r[0] is not None), key=lambda r: r[0])[:3]:

@@ -29,7 +29,7 @@ const DRAW_SEED: u64 = 326;
 const DURATION_S: f64 = 8.0;
 const REACH_M: f64 = 0.03;
 /// Most runs left unsettled at `DURATION_S`.
-const MAX_UNSETTLED: usize = 6;
+const MAX_UNSETTLED: usize = 5;
 /// Bound on the 90th percentile of the settle times, s.
 const P90_BOUND_S: f64 = 6.75;
 

@@ -103,7 +103,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             self.forget_stall();
         }
         if was && !holding {
-            if settling && self.hold_confirm_spread_m() < HOLD_CONFIRM_SPREAD_M {
+            // Only the settling confirm's exits count against its budget.
+            if settling && !walks && self.hold_confirm_spread_m() < HOLD_CONFIRM_SPREAD_M {
                 self.sup.off_model_confirm_exits += 1;
             }
             // Re-plan from the tables, not from the plan before the hold.

@@ -76,6 +76,18 @@ impl HoldFrames {
         kept > 1 && last - first >= fit_s
     }
 
+    /// The earlier of `from_s` and the time of the `n`-th latest frame
+    /// logged (frames are logged in time order), so that a line from there
+    /// runs through at least `n` frames while the log holds them: longer
+    /// cycles or lost frames stretch the stretch instead of leaving it too
+    /// short to fit.
+    pub fn start_of_latest(&self, from_s: f64, n: usize) -> f64 {
+        if n == 0 || self.count.min(HOLD_FRAME_LOG) < n {
+            return from_s;
+        }
+        from_s.min(self.frames[(self.count - n) % HOLD_FRAME_LOG][0])
+    }
+
     /// Least-squares line through the logged frames, each with standard
     /// deviation `xi_std`; None with fewer than `HOLD_LINE_MIN_FRAMES` or
     /// no time spread.
@@ -145,8 +157,17 @@ mod tests {
             })
             .sum();
         assert!((line.rate_std - 0.2e-3 / spread.sqrt()).abs() < 1e-12);
+        // The latest frames: 40 ms apart, so the 8th latest is 0.28 s back.
+        assert_eq!(log.start_of_latest(last_t, 1), last_t);
+        assert!((log.start_of_latest(last_t, 8) - (last_t - 0.28)).abs() < 1e-12);
+        assert_eq!(log.start_of_latest(0.0, 8), 0.0);
         log.clear();
         assert!(log.line(0.2e-3).is_none(), "cleared at hold entry");
+        assert_eq!(
+            log.start_of_latest(1.0, 8),
+            1.0,
+            "too few frames: unchanged"
+        );
         assert!(!log.judged);
     }
 }

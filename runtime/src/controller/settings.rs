@@ -305,14 +305,13 @@ pub const HOLD_THIRD_RATE_SIGMAS: f64 = 3.0;
 /// Holds left for the third combination's walk per target.
 pub const HOLD_THIRD_EXITS: u32 = 1;
 /// Latest frames through which the hold tells that the third combination
-/// has walked a capsule out of the band, s: 10 frames 40 ms apart, the
-/// coordinate to about 0.06 mm. 0.8 s (at 0.9 mm) measured alike on
-/// station keeping but left more random plants unsettled
-/// (docs/decisions.md).
+/// has walked a capsule out of the band, s: 10-11 frames 40 ms apart, the
+/// coordinate to about 0.06 mm, recent enough to follow the walk.
 pub const HOLD_THIRD_RECENT_S: f64 = 0.4;
 /// How far the third combination's walk alone may carry its most exposed
 /// capsule from its target before the hold is left for a shot, m: the
-/// band. At 0.8 mm the hold was left on walks that turned back
+/// settle band's 1 mm. At 0.8-0.9 mm the hold is also left on walks that
+/// stop inside, and more arrivals off the model go unsettled
 /// (docs/decisions.md).
 pub const HOLD_THIRD_OUT_M: f64 = 1.0e-3;
 /// How far the third combination's unit direction may turn, as the

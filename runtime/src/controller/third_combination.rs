@@ -62,7 +62,8 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// Whether the hold is left because the third combination has walked
     /// out: three capsules under the scanner cycle with shots on, after
     /// `HOLD_THIRD_RECENT_S` in the hold, when the line through that
-    /// latest stretch of frames puts the capsule with the largest share of
+    /// latest stretch of frames (or the latest `HOLD_LINE_MIN_FRAMES`,
+    /// on longer cycles) puts the capsule with the largest share of
     /// the combination beyond `HOLD_THIRD_OUT_M` by the walk alone. Unlike
     /// the look above it waits for the walk to reach the band's edge, so a
     /// drifting disturbance's swings, which reverse inside the band, do
@@ -70,7 +71,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// station keeping drifts out again and again over a long hold
     /// (docs/three-capsules.md), and a capsule at the edge is out of the
     /// band whether or not the hold is left.
-    pub(super) fn hold_walked_out_third(&mut self) -> bool {
+    pub(super) fn hold_walked_out_third(&self) -> bool {
         if self.settings.sampling == Sampling::Ideal
             || self.law.third_direction.iter().all(|&d| d == 0.0)
             || self.law.station.held_s() < HOLD_THIRD_RECENT_S
@@ -78,7 +79,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         {
             return false;
         }
-        let from_s = self.law.station.held_s() - HOLD_THIRD_RECENT_S;
+        let from_s = self.law.third_frames.start_of_latest(
+            self.law.station.held_s() - HOLD_THIRD_RECENT_S,
+            HOLD_LINE_MIN_FRAMES,
+        );
         let Some(line) = self
             .law
             .third_frames
