@@ -69,7 +69,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// drifting disturbance's swings, which reverse inside the band, do
     /// not set it off, and it is neither gated on the factors nor counted:
     /// station keeping drifts out again and again over a long hold
-    /// (docs/three-capsules.md), and a capsule at the edge is out of the
+    /// (docs/known-limits.md, "Three capsules"), and a capsule at the edge is out of the
     /// band whether or not the hold is left.
     pub(super) fn hold_walked_out_third(&self) -> bool {
         if self.settings.sampling == Sampling::Ideal
