@@ -14,9 +14,10 @@ sampling the worst fractions, the runs below 95 %, the median strict
 settle and the three worst runs of the 10 s window.
 
     cargo build --release
-    python3 docs/scripts/station_keeping.py target/release/capsule-mpc [--constant] [--lose-every N]
+    python3 docs/scripts/station_keeping.py target/release/capsule-mpc [--constant] [--lose-every N] [--seeds N]
 
-With `--lose-every N` every Nth tracking frame is lost.
+With `--lose-every N` every Nth tracking frame is lost; `--seeds N` runs
+seeds 1-N (default 4).
 """
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -73,13 +74,14 @@ def run(binary, job, extra):
 def main():
     args = sys.argv[1:]
     lose_every = pop_option(args, "--lose-every")
+    seeds = range(1, int(pop_option(args, "--seeds") or len(SEEDS)) + 1)
     extra = [] if lose_every is None else ["--lose-every", lose_every]
     models = ["random", "drift"]
     if "--constant" in args:
         args.remove("--constant")
         models.append("constant")
     binary = args[0]
-    jobs = [(m, s, t, seed) for m in models for s in SAMPLINGS for t in TARGETS_CM for seed in SEEDS]
+    jobs = [(m, s, t, seed) for m in models for s in SAMPLINGS for t in TARGETS_CM for seed in seeds]
     with ThreadPoolExecutor(2) as ex:
         results = list(ex.map(lambda j: run(binary, j, extra), jobs))
     for model in models:
