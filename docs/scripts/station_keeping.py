@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Three capsules' station keeping (docs/known-limits.md, "Three capsules").
+"""Station keeping (docs/known-limits.md, "Three capsules").
 
-The ten targets of `tests/three_capsules.rs`' scanner test x seeds 1-4,
+Three capsules: the ten targets of `tests/three_capsules.rs`' scanner test x seeds 1-4,
 constant and variable sampling, a random and a drifting disturbance of the
 paper's size (a constant bias as well with `--constant`), runs from rest
 at the origin long enough for 10 s after the first entry into the settle
@@ -14,15 +14,18 @@ sampling the worst fractions, the runs below 95 %, the median strict
 settle and the three worst runs of the 10 s window.
 
     cargo build --release
-    python3 docs/scripts/station_keeping.py target/release/capsule-mpc [--constant] [--lose-every N] [--seeds N]
+    python3 docs/scripts/station_keeping.py target/release/capsule-mpc [--two] [--constant] [--lose-every N] [--seeds N]
 
-With `--lose-every N` every Nth tracking frame is lost; `--seeds N` runs
-seeds 1-N (default 4).
+With `--two` the same for two capsules (the embedded config) on the
+24-target grid of `grid_runs.py` (+-4 cm, 2 cm steps). With `--lose-every
+N` every Nth tracking frame is lost; `--seeds N` runs seeds 1-N (default
+4). Options after the binary that this script does not know go to
+`simulate` (`--plant-drag-scale 1.2`: capsules off the model).
 """
 import sys
 from concurrent.futures import ThreadPoolExecutor
 
-from grid_runs import pop_option, simulate_args
+from grid_runs import TARGETS, pop_option, simulate_args
 
 CONFIG = "configs/three-capsules.toml"
 TARGETS_CM = [[1, 1, 1], [3, 3, 3], [-3, -3, -3], [3, -3, 3], [-3, 3, 0], [2, 0, -1],
@@ -61,7 +64,7 @@ def window_fraction(report):
 
 def run(binary, job, extra):
     model, sampling, target_cm, seed = job
-    args = ["--config", CONFIG, "--target", ",".join(f"{x / 100},0" for x in target_cm),
+    args = ["--target", ",".join(f"{x / 100},0" for x in target_cm),
             "--sampling", sampling, "--disturbance", "paper", "--disturbance-model", model,
             "--seed", str(seed), "--duration", str(DURATION_S)] + extra
     report = simulate_args(binary, args)
@@ -76,12 +79,21 @@ def main():
     lose_every = pop_option(args, "--lose-every")
     seeds = range(1, int(pop_option(args, "--seeds") or len(SEEDS)) + 1)
     extra = [] if lose_every is None else ["--lose-every", lose_every]
+    targets_cm = TARGETS_CM
+    if "--two" in args:
+        args.remove("--two")
+        targets_cm = [[round(x * 100, 6) for x in t] for t in TARGETS]
+    else:
+        extra += ["--config", CONFIG]
     models = ["random", "drift"]
     if "--constant" in args:
         args.remove("--constant")
         models.append("constant")
     binary = args[0]
-    jobs = [(m, s, t, seed) for m in models for s in SAMPLINGS for t in TARGETS_CM for seed in seeds]
+    # Anything after the binary goes to `simulate` as it is (a plant off
+    # the model: `--plant-drag-scale 1.2`).
+    extra += args[1:]
+    jobs = [(m, s, t, seed) for m in models for s in SAMPLINGS for t in targets_cm for seed in seeds]
     with ThreadPoolExecutor(2) as ex:
         results = list(ex.map(lambda j: run(binary, j, extra), jobs))
     for model in models:
