@@ -12,8 +12,8 @@
 //! under constant sampling (measured at most 1.08 x) and 1.6 x under
 //! variable sampling (measured at most 1.54 x: 1.22 s against 0.79 s), and
 //! at most `MAX_SLOW_RUNS` of a plant's 32 runs take longer than twice the
-//! nominal worst (measured at most 1; variants of the end game that this
-//! bound rejects: docs/decisions.md).
+//! nominal worst (measured at most 1, constant gain x0.9; variants of the
+//! end game that this bound rejects: docs/decisions.md).
 //! Issue 26 asks for 1.3 x under both: variable sampling not met yet.
 //! Printed: settled
 //! runs and settle times per plant (docs/known-limits.md quotes them).
@@ -140,6 +140,26 @@ fn off_model_capsules_settle_near_the_nominal_times() {
         );
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// A relative drift the hold's first look (0.8 s of frames) keeps only on
+/// its rate's uncertainty is judged again at 1.3 s in the hold
+/// (`HOLD_DRIFT_RECHECK_S`): the four targets' two slowest drag x0.8 runs,
+/// (-1, 2) cm, whose line at 0.8 s (-0.66 +- 0.27 mm/s) stopped inside
+/// within two deviations while the capsules stopped 1.9 mm apart at the
+/// band's edge, settled at 4.20 s (constant, seed 7) and 4.38 s (variable,
+/// seed 4) without the second look, 2.24 / 2.26 s with it.
+#[test]
+fn a_drift_the_first_look_cannot_tell_from_noise_is_judged_again() {
+    let config = Config::embedded_default();
+    let plant = PlantMismatch::uniform(0.8, 1.0);
+    for (sampling, seed) in [(Sampling::Constant, 7), (Sampling::Variable, 4)] {
+        let settle_s = one(&config, (-1.0, 2.0), sampling, seed, &plant).settle_s;
+        assert!(
+            settle_s.is_some_and(|s| s <= SLOW_S),
+            "{sampling:?}, seed {seed}: settle {settle_s:?} s, allowed {SLOW_S} s"
+        );
+    }
 }
 
 /// The explicit law alone under variable sampling, its phases up to 10

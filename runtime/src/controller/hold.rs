@@ -247,19 +247,27 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// the centre law itself moves the capsules apart or together, which
     /// the stopping test does not count). Left when no rate within
     /// `HOLD_DRIFT_RATE_SIGMAS` of the line's stops the capsules within
-    /// `HOLD_DRIFT_SPREAD_M`.
+    /// `HOLD_DRIFT_SPREAD_M`. A hold kept only on that allowance (the
+    /// line's own rate would not stop inside) is judged once more at
+    /// `HOLD_DRIFT_RECHECK_S`, on the frames since: 0.8 s of frames know
+    /// the rate to about 0.3 mm/s, and a 0.7 mm/s drift kept so stopped
+    /// at the band's edge (docs/decisions.md).
     pub(super) fn hold_drifts_out(&mut self) -> bool {
         if self.settings.sampling == Sampling::Ideal
             || NX / 2 > HOLD_EARLY_EXIT_MAX_CAPSULES
             || self.sup.drift_exits >= HOLD_DRIFT_EXITS
-            || self.law.hold_frames.judged
             || self.law.station.held_s() < HOLD_DRIFT_FIT_S
+            || (self.law.hold_frames.judged
+                && !(self.law.hold_frames.recheck
+                    && self.law.station.held_s() >= HOLD_DRIFT_RECHECK_S))
             || !self.factors_differ_from_told()
             || !self.learned_gains_agree()
         {
             return false;
         }
+        let first_look = !self.law.hold_frames.judged;
         self.law.hold_frames.judged = true;
+        self.law.hold_frames.recheck = false;
         let station = &self.law.station;
         let xi_std = self.settings.position_noise_m * station.direction_norm();
         let Some(line) = self.law.hold_frames.line(xi_std) else {
@@ -278,6 +286,18 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             authority,
             HOLD_DRIFT_RATE_SIGMAS * line.rate_std,
         );
+        if stops && first_look {
+            // Kept only on the rate's uncertainty: looked at again later.
+            self.law.hold_frames.recheck = !station.motion_stops_within(
+                line.coordinate,
+                line.rate,
+                S::DT_S,
+                self.hold_gap_s(),
+                HOLD_DRIFT_SPREAD_M,
+                authority,
+                0.0,
+            );
+        }
         if !stops {
             self.sup.drift_exits += 1;
         }

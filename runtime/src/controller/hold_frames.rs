@@ -30,6 +30,8 @@ pub struct HoldFrames {
     /// Whether this hold's drift has been judged (once per hold, see
     /// `HOLD_DRIFT_FIT_S`).
     pub judged: bool,
+    /// Whether it is judged once more (`HOLD_DRIFT_RECHECK_S`).
+    pub recheck: bool,
 }
 
 /// A straight line through the frames: the coordinate at the last frame
@@ -47,6 +49,7 @@ impl HoldFrames {
             frames: [[0.0; 2]; HOLD_FRAME_LOG],
             count: 0,
             judged: false,
+            recheck: false,
         }
     }
 
@@ -54,6 +57,7 @@ impl HoldFrames {
     pub fn clear(&mut self) {
         self.count = 0;
         self.judged = false;
+        self.recheck = false;
     }
 
     /// Logs a frame at `t_s` since entry with coordinate `xi`.
@@ -168,6 +172,6 @@ mod tests {
             1.0,
             "too few frames: unchanged"
         );
-        assert!(!log.judged);
+        assert!(!log.judged && !log.recheck);
     }
 }

@@ -285,6 +285,10 @@ pub const HOLD_DRIFT_SPREAD_M: f64 = 2.0e-3;
 pub const HOLD_DRIFT_RATE_SIGMAS: f64 = 2.0;
 /// Holds left for the frames' drift per target.
 pub const HOLD_DRIFT_EXITS: u32 = 1;
+/// Time in the hold at which a drift kept only on its rate's uncertainty
+/// is judged again, s: 32 frames 40 ms apart know the rate to about
+/// 0.14 mm/s (docs/decisions.md).
+pub const HOLD_DRIFT_RECHECK_S: f64 = 1.3;
 /// Frames of hold through which three capsules' third combination is
 /// fitted before the hold may be left for its walk, s (see
 /// `third_combination`): the rate to about 0.07 mm/s on 0.2 mm frames
