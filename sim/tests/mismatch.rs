@@ -10,7 +10,7 @@
 //! the nominal plant within 2.0 s (measured worst 1.19 s constant, 0.99 s
 //! variable); off the model the median is at most 1.3 x the nominal one
 //! under constant sampling (measured at most 1.08 x) and 1.6 x under
-//! variable sampling (measured at most 1.54 x: 1.22 s against 0.79 s), and
+//! variable sampling (measured at most 1.52 x: 1.20 s against 0.79 s), and
 //! at most `MAX_SLOW_RUNS` of a plant's 32 runs take longer than twice the
 //! nominal worst (measured at most 1, constant gain x0.9; variants of the
 //! end game that this bound rejects: docs/decisions.md).
