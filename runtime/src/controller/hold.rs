@@ -277,26 +277,22 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         // test caps it there): leaving a hold that would have settled costs
         // more than a second of drift.
         let authority = station.drag_authority(&self.est.applied_scales);
-        let stops = station.motion_stops_within(
-            line.coordinate,
-            line.rate,
-            S::DT_S,
-            self.hold_gap_s(),
-            HOLD_DRIFT_SPREAD_M,
-            authority,
-            HOLD_DRIFT_RATE_SIGMAS * line.rate_std,
-        );
-        if stops && first_look {
-            // Kept only on the rate's uncertainty: looked at again later.
-            self.law.hold_frames.recheck = !station.motion_stops_within(
+        let gap_s = self.hold_gap_s();
+        let stops_within = |rate_std: f64| {
+            station.motion_stops_within(
                 line.coordinate,
                 line.rate,
                 S::DT_S,
-                self.hold_gap_s(),
+                gap_s,
                 HOLD_DRIFT_SPREAD_M,
                 authority,
-                0.0,
-            );
+                rate_std,
+            )
+        };
+        let stops = stops_within(HOLD_DRIFT_RATE_SIGMAS * line.rate_std);
+        if stops && first_look {
+            // Kept only on the rate's uncertainty: looked at again later.
+            self.law.hold_frames.recheck = !stops_within(0.0);
         }
         if !stops {
             self.sup.drift_exits += 1;
