@@ -226,6 +226,17 @@ fn extra_delay_is_refused_where_it_means_nothing_or_is_out_of_range() {
     }
 }
 
+/// `--lose-every 0` would lose no frame while it reads as "lose them":
+/// refused, naming what N counts.
+#[test]
+fn losing_every_zeroth_frame_is_refused() {
+    let out = bin()
+        .args(["simulate", "--sampling", "constant", "--lose-every", "0"])
+        .output()
+        .unwrap();
+    assert_one_line_error(&out, "lose every 0: N counts the tracking frames");
+}
+
 /// `--calibrated-std` is checked before anything runs: a fraction within
 /// the runtime's [0.001, 1], and only with the factors it qualifies.
 #[test]

@@ -127,6 +127,13 @@ def _target_state(target, m: int) -> List[float]:
     raise ValueError(f"target has {len(t)} entries; give {m} positions (m) or the full state of {2 * m}")
 
 
+def _count(name: str, value) -> int:
+    """A whole number >= 1, or a ValueError naming ``name``."""
+    if isinstance(value, bool) or int(value) != value or value < 1:
+        raise ValueError(f"{name} {value!r} must be a whole number >= 1")
+    return int(value)
+
+
 class Run:
     """One closed-loop run: ``t`` (T,), ``x`` (T, 2M) true states, ``u`` (T,)
     gradients (``u[k]`` holds from ``t[k]`` to ``t[k+1]``), ``phase`` (T,)
@@ -134,7 +141,9 @@ class Run:
     ``metrics`` (the CLI's metrics, same keys and values), ``modes`` (the
     controller's mode timeline: dicts with ``t_s`` and ``mode``),
     ``estimated_factors`` (per capsule, the controller's estimate of its
-    gain and drag factors against the model, with standard deviations);
+    gain and drag factors against the model, with standard deviations),
+    ``timing`` (under the scanner cycle: ``tracking_time_s``,
+    ``extra_delay_s`` and ``lose_every`` as simulated);
     ``to_json()`` is the CLI's
     JSON."""
 
@@ -149,6 +158,7 @@ class Run:
         self.metrics = d["metrics"]
         self.target = np.asarray(d["target"], dtype=float)
         self.frames = d.get("frames")
+        self.timing = d.get("timing")
         self.plant = d.get("plant")
         self.modes = d.get("modes") or []
         self.estimated_factors = d.get("estimated_factors")
@@ -183,6 +193,8 @@ def simulate(
     calibrated_drag_scale=None,
     calibrated_gain_scale=None,
     calibrated_std: Optional[float] = None,
+    extra_delay_s: Optional[float] = None,
+    lose_every: Optional[int] = None,
 ) -> Run:
     """One closed-loop run in the plant simulator, from rest at ``start``
     (positions, m; the origin when None) to ``target`` (M positions in m,
@@ -195,7 +207,10 @@ def simulate(
     default: on); ``calibrated_*_scale``: factors the controller is told at
     the start, as a calibration gives them (None: it starts from the model
     and learns them), with standard deviation ``calibrated_std`` (a
-    fraction; None: 0.03).
+    fraction; None: 0.03). Odd timing under the scanner cycle:
+    ``extra_delay_s`` after each tracking phase (s; None: the config's) and
+    ``lose_every`` N-th tracking frame lost (None: none lost; 1 loses them
+    all).
     Releases the GIL while it runs. ``ValueError`` names a bad argument."""
     cfg = _config(config)
     scale = lambda s: None if s is None else [float(v) for v in np.atleast_1d(s)]
@@ -215,6 +230,8 @@ def simulate(
         scale(calibrated_drag_scale),
         scale(calibrated_gain_scale),
         None if calibrated_std is None else float(calibrated_std),
+        None if extra_delay_s is None else float(extra_delay_s),
+        None if lose_every is None else _count("lose_every", lose_every),
     )
     return Run(text)
 

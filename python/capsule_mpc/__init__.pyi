@@ -41,6 +41,7 @@ class Run:
     metrics: Dict
     target: np.ndarray
     frames: Optional[Dict]
+    timing: Optional[Dict]
     plant: Optional[Dict]
     modes: List[Dict]
     estimated_factors: Optional[List[Dict]]
@@ -65,6 +66,8 @@ def simulate(
     calibrated_drag_scale: Optional[object] = ...,
     calibrated_gain_scale: Optional[object] = ...,
     calibrated_std: Optional[float] = ...,
+    extra_delay_s: Optional[float] = ...,
+    lose_every: Optional[int] = ...,
 ) -> Run: ...
 
 class ReachMap:

@@ -150,7 +150,7 @@ fn refine_of(name: &str) -> PyResult<RefineMode> {
 /// One closed-loop run: the CLI's `simulate --json` report as a string.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale, shooting, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None))]
+#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale, shooting, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None, extra_delay_s = None, lose_every = None))]
 fn simulate_json(
     py: Python<'_>,
     config: &PyConfig,
@@ -168,8 +168,12 @@ fn simulate_json(
     calibrated_drag_scale: Option<Vec<f64>>,
     calibrated_gain_scale: Option<Vec<f64>>,
     calibrated_std: Option<f64>,
+    extra_delay_s: Option<f64>,
+    lose_every: Option<usize>,
 ) -> PyResult<String> {
     let mut r = SimulateRequest::new(target, "custom");
+    r.extra_delay_s = extra_delay_s;
+    r.lose_every = lose_every;
     r.shooting = shooting;
     r.start_m = start.unwrap_or_default();
     r.sampling = sampling_of(sampling)?;

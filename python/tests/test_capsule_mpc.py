@@ -82,6 +82,37 @@ def test_simulate_is_the_cli_bit_for_bit(tmp_path, sampling, disturbance):
         assert ours[k] == cli[k]
 
 
+@pytest.mark.skipif(not os.path.exists(CLI), reason="the CLI is not built (cargo build --release)")
+def test_odd_timing_is_the_cli_bit_for_bit_and_recorded(tmp_path):
+    out = tmp_path / "run.json"
+    subprocess.run(
+        [CLI, "simulate", "--target", "0.02,0,-0.01,0", "--sampling", "constant", "--seed", "2",
+         "--extra-delay", "0.005", "--lose-every", "4", "--json", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    cli = json.loads(out.read_text())
+    py = cm.simulate([0.02, -0.01], sampling="constant", seed=2, extra_delay_s=0.005, lose_every=4)
+    assert py.u.tolist() == cli["u"]
+    assert py.timing == cli["timing"] == {"tracking_time_s": 0.02, "extra_delay_s": 0.005, "lose_every": 4}
+    lost = sum(1 for m in py.measurements if m["lost"])
+    assert abs(lost - len(py.measurements) / 4) <= 1, (lost, len(py.measurements))
+    # The frame reaches the controller 5 ms after its tracking phase ends.
+    delays = {round(m["available_s"] - m["t_s"], 6) for m in py.measurements}
+    assert delays == {0.025}, delays
+    assert cm.simulate([0.02, -0.01], sampling="constant").timing["lose_every"] is None
+
+
+def test_odd_timing_errors_name_the_argument():
+    for bad in (0, -2, 2.5, True):
+        with pytest.raises(ValueError, match="lose_every"):
+            cm.simulate([0.02, -0.01], sampling="constant", lose_every=bad)
+    with pytest.raises(ValueError, match=r"extra delay -0.01 s is outside \[0, 1\] s"):
+        cm.simulate([0.02, -0.01], sampling="constant", extra_delay_s=-0.01)
+    with pytest.raises(ValueError, match="ideal sampling has no tracking phase"):
+        cm.simulate([0.02, -0.01], sampling="ideal", extra_delay_s=0.005)
+
+
 def test_bad_target_length():
     with pytest.raises(ValueError, match="target has 3 entries"):
         cm.simulate([0.01, 0.02, 0.03])

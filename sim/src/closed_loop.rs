@@ -7,7 +7,7 @@ use crate::mismatch::PlantMismatch;
 use crate::plant::{Phase, Plant};
 use crate::report::{
     CalibratedReport, FactorEstimate, FrameCounts, MeasurementRecord, ModeChange, ModelParams,
-    PlantReport, RunReport, TierCycles,
+    PlantReport, RunReport, ScannerTiming, TierCycles,
 };
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
@@ -564,6 +564,11 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     report.fallback_cycles = Some(statuses.fallback);
     if opts.sampling != Sampling::Ideal {
         report.frames = Some(statuses.frames);
+        report.timing = Some(ScannerTiming {
+            tracking_time_s: config.scanner.tracking_time_s,
+            extra_delay_s: opts.extra_delay_s,
+            lose_every: opts.lose_every,
+        });
     }
     report.estimated_factors = Some(
         (0..NX / 2)

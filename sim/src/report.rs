@@ -112,6 +112,9 @@ pub struct RunReport {
     /// How the controller took the tracking frames (scanner-cycle samplings).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames: Option<FrameCounts>,
+    /// The scanner cycle's timing as simulated (scanner-cycle samplings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timing: Option<ScannerTiming>,
     /// The controller's mode timeline: the cycle start time at which each
     /// mode began (`Controller::mode`: no_target, hold, brake, plan,
     /// fallback), in order.
@@ -152,6 +155,16 @@ pub struct FrameCounts {
     pub reacquired: usize,
 }
 
+/// The scanner cycle's timing: each tracking phase lasts
+/// `tracking_time_s`, then `extra_delay_s` pass before the frame reaches
+/// the controller; every `lose_every`-th frame is lost (None: none).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ScannerTiming {
+    pub tracking_time_s: f64,
+    pub extra_delay_s: f64,
+    pub lose_every: Option<usize>,
+}
+
 /// Cycles per solver tier (`explicit`: the explicit tier's plan was played;
 /// `refined`: the SQP refinement found a cheaper one).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -188,6 +201,7 @@ impl RunReport {
             modes: None,
             estimated_factors: None,
             frames: None,
+            timing: None,
             disturbance: None,
             seed: None,
             d: None,

@@ -97,6 +97,9 @@ impl SimulateRequest {
         if let (Sampling::Ideal, Some(d)) = (self.sampling, self.extra_delay_s) {
             bail!("extra delay {d} applies to the scanner cycle (constant or variable sampling); ideal sampling has no tracking phase to delay");
         }
+        if self.lose_every == Some(0) {
+            bail!("lose every 0: N counts the tracking frames, so it is at least 1 (1 loses every frame, 4 every 4th)");
+        }
         self.mismatch.factors(m)?;
         if let Some(known) = &self.known_factors {
             known.factors_named(m, "calibrated")?;

@@ -226,6 +226,7 @@ mod tests {
             plant: None,
             calibrated: None,
             frames: None,
+            timing: None,
             modes: None,
             estimated_factors: None,
         }
