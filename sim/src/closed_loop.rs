@@ -565,7 +565,7 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     if opts.sampling != Sampling::Ideal {
         report.frames = Some(statuses.frames);
         report.timing = Some(ScannerTiming {
-            tracking_time_s: config.scanner.tracking_time_s,
+            tracking_time_s: tracking_s,
             extra_delay_s: opts.extra_delay_s,
             lose_every: opts.lose_every,
         });
