@@ -293,11 +293,16 @@ def reach(
     calibrated_drag_scale=None,
     calibrated_gain_scale=None,
     calibrated_std: Optional[float] = None,
+    disturbance_model: str = "random",
+    duration_s: Optional[float] = None,
+    extra_delay_s: Optional[float] = None,
 ) -> ReachMap:
     """The closed loop from rest at the origin to every target of the grid
     (``range_cm`` half-width, ``step_cm`` spacing, per capsule) on both
     cores; releases the GIL and prints nothing. ``shooting``, the plant's
-    factors and the told (calibrated) ones as for ``simulate``."""
+    factors, the told (calibrated) ones, ``disturbance_model`` and
+    ``extra_delay_s`` as for ``simulate``; ``duration_s`` per run (None:
+    the CLI's default for the grid and sampling)."""
     cfg = _config(config)
     scale = lambda s: None if s is None else [float(v) for v in np.atleast_1d(s)]
     text = _native.reach_json(
@@ -313,6 +318,9 @@ def reach(
         scale(calibrated_drag_scale),
         scale(calibrated_gain_scale),
         None if calibrated_std is None else float(calibrated_std),
+        disturbance_model,
+        None if duration_s is None else float(duration_s),
+        None if extra_delay_s is None else float(extra_delay_s),
     )
     half = int(np.floor(range_cm / step_cm + 1e-9))
     return ReachMap(text, np.arange(-half, half + 1) * float(step_cm))

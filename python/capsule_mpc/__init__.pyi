@@ -99,6 +99,9 @@ def reach(
     calibrated_drag_scale: Optional[object] = ...,
     calibrated_gain_scale: Optional[object] = ...,
     calibrated_std: Optional[float] = ...,
+    disturbance_model: str = ...,
+    duration_s: Optional[float] = ...,
+    extra_delay_s: Optional[float] = ...,
 ) -> ReachMap: ...
 
 class Calibration:

@@ -5,7 +5,7 @@
 //! numpy arrays. Long calls release the GIL; nothing is printed.
 
 use capsule_mpc_generator::config::{
-    Config as GenConfig, ConfigError as GenConfigError, DisturbanceKind, RefineMode,
+    Config as GenConfig, ConfigError as GenConfigError, RefineMode,
 };
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{ControllerSettings, CycleOutput, Sampling as RtSampling};
@@ -195,7 +195,7 @@ fn simulate_json(
 
 /// The reach map: `{"points": [...], "summary": {...}}` as the CLI's JSON.
 #[pyfunction]
-#[pyo3(signature = (config, range_cm, step_cm, sampling, disturbance, seed, shooting, plant_drag_scale = None, plant_gain_scale = None, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None))]
+#[pyo3(signature = (config, range_cm, step_cm, sampling, disturbance, seed, shooting, plant_drag_scale = None, plant_gain_scale = None, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None, disturbance_model = "random", duration_s = None, extra_delay_s = None))]
 #[allow(clippy::too_many_arguments)]
 fn reach_json(
     py: Python<'_>,
@@ -211,6 +211,9 @@ fn reach_json(
     calibrated_drag_scale: Option<Vec<f64>>,
     calibrated_gain_scale: Option<Vec<f64>>,
     calibrated_std: Option<f64>,
+    disturbance_model: &str,
+    duration_s: Option<f64>,
+    extra_delay_s: Option<f64>,
 ) -> PyResult<String> {
     if !(range_cm.is_finite() && range_cm >= 0.0) {
         return Err(value_error(format!(
@@ -230,11 +233,11 @@ fn reach_json(
         step_m: step_cm / 100.0,
         sampling: sampling_of(sampling)?,
         disturbance: DisturbanceLevel::from_name(disturbance).map_err(value_error)?,
-        disturbance_kind: DisturbanceKind::Random,
+        disturbance_kind: disturbance_kind_from_name(disturbance_model).map_err(value_error)?,
         seed,
         start_m: Vec::new(),
-        duration_s: None,
-        extra_delay_s: None,
+        duration_s,
+        extra_delay_s,
         mismatch: PlantMismatch::from_scales(plant_drag_scale, plant_gain_scale),
         known_factors,
         known_factor_std,

@@ -177,6 +177,31 @@ def test_reach_map_grids():
     assert "24 targets" in m.summary_line()
 
 
+@pytest.mark.skipif(not os.path.exists(CLI), reason="the CLI is not built (cargo build --release)")
+def test_reach_under_drift_and_delay_is_the_cli(tmp_path):
+    out = tmp_path / "reach.json"
+    subprocess.run(
+        [CLI, "reach", "--range-cm", "1", "--step-cm", "1", "--sampling", "variable", "--disturbance", "paper",
+         "--disturbance-model", "drift", "--seed", "2", "--duration", "3", "--extra-delay", "0.005",
+         "--json", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    cli = json.loads(out.read_text())
+    m = cm.reach(range_cm=1.0, step_cm=1.0, sampling="variable", disturbance="paper",
+                 disturbance_model="drift", seed=2, duration_s=3.0, extra_delay_s=0.005)
+    assert m.summary == cli["summary"] and m.summary["targets"] == 8
+    theirs = [math.nan if p["settle_time_s"] is None else p["settle_time_s"] for p in cli["points"]]
+    assert np.array_equal(m.settle_time_s, np.asarray(theirs), equal_nan=True)
+    # The drift and the delay change the runs.
+    plain = cm.reach(range_cm=1.0, step_cm=1.0, sampling="variable", disturbance="paper", seed=2, duration_s=3.0)
+    assert not np.array_equal(plain.settle_time_s, m.settle_time_s, equal_nan=True)
+    with pytest.raises(ValueError, match="ideal sampling has no tracking phase"):
+        cm.reach(range_cm=1.0, extra_delay_s=0.005)
+    with pytest.raises(ValueError, match="disturbance"):
+        cm.reach(range_cm=1.0, disturbance_model="sideways")
+
+
 def test_shooting_is_a_choice_for_two_capsules():
     # On by default (the same run as asked on), faster than the refinement
     # alone, under ideal sampling and under the scanner cycle.

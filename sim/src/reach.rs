@@ -186,6 +186,9 @@ pub fn reach_map(
     // A bad duration would refuse every target: say so once.
     crate::closed_loop::check_duration(duration_s)?;
     if let Some(d) = opts.extra_delay_s {
+        if opts.sampling == Sampling::Ideal {
+            bail!("extra delay {d} applies to the scanner cycle (constant or variable sampling); ideal sampling has no tracking phase to delay");
+        }
         crate::closed_loop::check_extra_delay(config, d)?;
     }
     if opts.known_factors.is_some() {
