@@ -295,3 +295,43 @@ fn split_drag() -> PlantMismatch {
         gain_scale: vec![],
     }
 }
+
+/// Capsules farther off than the controller is told (gain 15-20 %, drag
+/// 30 %): after a long phase at full gradient the first frames leave the
+/// gate the told uncertainty widens, and the frames' speed tells the
+/// capsule from a glitch (`MODEL_ERROR_SPEED_SIGMAS`). Variable sampling,
+/// the paper's disturbance, seeds 1-8: every run settles within 6 s and no
+/// run rejects more than 6 true frames (measured at most 4 and a worst
+/// settle of 4.90 s; judged on the first frame alone, seed 3 rejected 43,
+/// 42 and 20: docs/decisions.md).
+#[test]
+fn capsules_beyond_their_told_uncertainty_are_followed_not_rejected() {
+    const MAX_REJECTED: usize = 6;
+    let config = Config::embedded_default();
+    let cases = [
+        (vec![1.3], vec![0.85, 1.15], (-3.01, -2.21)),
+        (vec![1.3, 0.7], vec![0.85, 1.15], (-3.44, -3.27)),
+        (vec![1.0], vec![1.0, 1.2], (-3.01, -2.21)),
+    ];
+    let mut failures = Vec::new();
+    for (drag_scale, gain_scale, target_cm) in cases {
+        let plant = PlantMismatch {
+            drag_scale,
+            gain_scale,
+        };
+        for seed in 1..=8 {
+            let o = one(&config, target_cm, Sampling::Variable, seed, &plant);
+            println!(
+                "{plant:?} {target_cm:?} seed {seed}: settle {:?} s, rejected {} of {}",
+                o.settle_s, o.rejected, o.received
+            );
+            if o.settle_s.is_none() || o.rejected > MAX_REJECTED {
+                failures.push(format!(
+                    "{plant:?} {target_cm:?} seed {seed}: settle {:?}, rejected {}",
+                    o.settle_s, o.rejected
+                ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}

@@ -359,6 +359,12 @@ pub const REACQUIRE_AFTER_REJECTIONS: usize = 5;
 /// a capsule off the model: the estimate follows them at the third (or at
 /// `reacquire_after_rejections`, if fewer).
 pub const MODEL_ERROR_FOLLOW_FRAMES: usize = 3;
+/// Gated-out frames that agree with one another, whose run started within
+/// `MODEL_DRIFT_MAX_M` of the estimate, and whose speed departs from the
+/// estimate's by more than this many standard deviations of the two are
+/// a capsule off the model too (one farther off than told): a glitch
+/// offsets the frames and keeps their speed (docs/decisions.md).
+pub const MODEL_ERROR_SPEED_SIGMAS: f64 = 3.0;
 /// Default `ControllerSettings::glitch_frames`: 0.8 s of tracking frames at
 /// the default constant sampling.
 pub const GLITCH_FRAMES: usize = 20;

@@ -84,6 +84,11 @@ pub(super) struct Estimation<const NX: usize> {
     /// after `MODEL_ERROR_FOLLOW_FRAMES` (else a glitch, see
     /// `ControllerSettings::glitch_frames`).
     pub candidate_continues_track: bool,
+    /// Whether the candidate's first frame was within `MODEL_DRIFT_MAX_M`
+    /// of the estimate for every capsule: near enough for a model error
+    /// the told uncertainty understates (see
+    /// `Controller::candidate_speed_departs`).
+    pub candidate_starts_near: bool,
     /// The estimate the last re-acquisition replaced, predicted along (see
     /// `REPLACED_TRACK_MAX_STD_M`).
     pub replaced: [CapsuleFilter; NX],
@@ -118,6 +123,7 @@ impl<const NX: usize> Estimation<NX> {
             candidate: [CapsuleFilter::new(0.0, 0.0); NX],
             candidate_frames: 0,
             candidate_continues_track: false,
+            candidate_starts_near: false,
             replaced: [CapsuleFilter::new(0.0, 0.0); NX],
             has_replaced: false,
             confirmed_frames: 0,

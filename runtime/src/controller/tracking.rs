@@ -218,7 +218,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 let after = self.settings.reacquire_after_rejections;
                 let needed = if self.est.confirmed_frames < ESTABLISHED_AFTER_FRAMES {
                     after
-                } else if self.est.candidate_continues_track {
+                } else if self.est.candidate_continues_track || self.candidate_speed_departs() {
                     after.min(MODEL_ERROR_FOLLOW_FRAMES)
                 } else {
                     after.max(self.settings.glitch_frames.saturating_add(1))
@@ -246,6 +246,28 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
             && nis(&self.est.candidate[..m], z, r) < nis(&self.est.filters[..m], z, r)
     }
 
+    /// Whether the run of gated-out frames is a capsule farther off the
+    /// model than told: it started near the estimate
+    /// (`candidate_starts_near`), and after `MODEL_ERROR_FOLLOW_FRAMES`
+    /// some capsule's speed in it departs from the estimate's by more than
+    /// `MODEL_ERROR_SPEED_SIGMAS`. The drift bound at its first frame
+    /// counts the told uncertainty only; a capsule 15-20 % off arrives
+    /// beyond it after a long phase at full gradient, and the estimate,
+    /// holding a target the capsule has left, rejected 20 true frames.
+    pub(super) fn candidate_speed_departs(&self) -> bool {
+        if !self.est.candidate_starts_near || self.est.candidate_frames < MODEL_ERROR_FOLLOW_FRAMES
+        {
+            return false;
+        }
+        self.est.candidate[..NX / 2]
+            .iter()
+            .zip(&self.est.filters[..NX / 2])
+            .any(|(c, f)| {
+                let dv = c.mean[1] - f.mean[1];
+                dv * dv > sq(MODEL_ERROR_SPEED_SIGMAS) * (c.cov[3] + f.cov[3])
+            })
+    }
+
     /// Feeds a gated-out frame to the re-acquisition candidate: fused when
     /// it agrees with the frames before it, else the candidate restarts at
     /// it (position at the frame, speed zero with a wide uncertainty, so
@@ -267,6 +289,10 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
                 &self.est.model_drift[..m],
                 f64::INFINITY,
             );
+            self.est.candidate_starts_near = self.est.filters[..m]
+                .iter()
+                .zip(z)
+                .all(|(f, &p)| libm::fabs(p - f.mean[0]) <= MODEL_DRIFT_MAX_M);
             let std = self.settings.position_noise_m.max(1e-6);
             for (c, &p) in self.est.candidate.iter_mut().zip(z) {
                 *c = CapsuleFilter::with_speed_std(p, std, REACQUIRE_SPEED_STD_M_PER_S);
