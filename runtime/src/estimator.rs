@@ -355,7 +355,7 @@ mod tests {
         // The default small capsule: dv/dgain = g u dt, dv/ddrag = -b v|v| dt.
         let (g, b, u, dt) = (173.0, 135.0, 0.04, 0.02);
         let step = |s: &mut ScaleEstimate, k: usize, truth: [f64; 2], glitch: f64| {
-            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let sign = if k.is_multiple_of(2) { 1.0 } else { -1.0 };
             let v = 0.02 + 0.01 * (k % 7) as f64;
             let dv = [sign * g * u * dt, -b * v * v * dt];
             s.sens = [0.0; 4];
