@@ -2,6 +2,7 @@
 //! (the centre's PD about the station-keeping dither).
 
 use super::braking::*;
+use super::numeric::sq;
 use super::settings::*;
 use super::station::STATION_SPEED_BUDGET_M_PER_S;
 use super::Controller;
@@ -20,6 +21,7 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// (+0.98, -0.56) mm, which the hold centres to +-0.77 mm, and sent them
     /// back to the tables for a 0.4 s differential swing out of the band.
     pub(super) fn update_hold(&mut self, e: &[f64; NX]) -> bool {
+        self.update_station_gains();
         let s = &self.settings;
         let slow = |speed: f64| (0..NX / 2).all(|i| libm::fabs(e[2 * i + 1]) <= speed);
         let centre_m = libm::fabs(capsule_centre_m(e));
@@ -171,6 +173,31 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
         } else {
             HOLD_CONFIRM_SPREAD_M
         }
+    }
+
+    /// Tells the station keeper the capsules' gains in use once their
+    /// learned factors differ from one another by more than
+    /// `STATION_GAIN_DIFFERENCE_SIGMAS` (see `StationKeeper::set_gains`);
+    /// until then, or on the model, the drag direction as it is (the
+    /// factors' noise would only turn it).
+    fn update_station_gains(&mut self) {
+        let m = NX / 2;
+        let scales = &self.est.scales;
+        let differ = (0..m).any(|i| {
+            (i + 1..m).any(|j| {
+                let d = scales[i].mean[0] - scales[j].mean[0];
+                d * d > sq(STATION_GAIN_DIFFERENCE_SIGMAS) * (scales[i].cov[0] + scales[j].cov[0])
+            })
+        });
+        if !differ {
+            self.law.station.set_gains(None);
+            return;
+        }
+        let mut gains = [0.0; NX];
+        for (i, g) in gains.iter_mut().enumerate().take(m) {
+            *g = capsule_gain_and_drag::<S, NX, K>(i).0 * self.est.applied_scales[i][0];
+        }
+        self.law.station.set_gains(Some(&gains[..m]));
     }
 
     /// Whether the capsules' learned gain factors agree within

@@ -270,6 +270,10 @@ pub const HOLD_CONFIRM_OFF_MODEL_EXITS: u32 = 2;
 /// apart or together, the stopping test misjudges the motion, and the
 /// tighter confirm left hold after hold (docs/decisions.md).
 pub const HOLD_CONFIRM_GAIN_AGREEMENT: f64 = 0.05;
+/// The station keeper takes its coordinate across the capsules' gains in
+/// use once their learned gain factors differ from one another by more
+/// than this many standard deviations (see `StationKeeper::set_gains`).
+pub const STATION_GAIN_DIFFERENCE_SIGMAS: f64 = 3.0;
 /// Frames of hold through which the relative drift's line is fitted
 /// before the hold may be left for it, s (see `hold_frames`): the rate to
 /// about 0.3 mm/s on 0.2 mm frames 40 ms apart. Judged once per hold:

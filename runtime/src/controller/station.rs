@@ -51,6 +51,9 @@ pub const STATION_RATE_FILTER_S: f64 = 0.3;
 pub struct StationKeeper<const NX: usize> {
     /// Drag direction `beta_i / sum beta^2` per capsule (the first NX / 2
     /// entries), m (zero: no differential drag, the dither is off).
+    drag_direction: [f64; NX],
+    /// The coordinate the dither holds: the drag direction less its
+    /// component along the capsules' gains (see `set_gains`), m.
     direction: [f64; NX],
     /// `direction_i * b_i`: each capsule's share of the differential drag
     /// (they sum to 1 when the drags differ), for `drag_authority`.
@@ -92,6 +95,7 @@ impl<const NX: usize> StationKeeper<NX> {
             drag_share[i] = direction[i] * drag[i];
         }
         StationKeeper {
+            drag_direction: direction,
             direction,
             drag_share,
             phase: 0,
@@ -101,6 +105,38 @@ impl<const NX: usize> StationKeeper<NX> {
             integral: 0.0,
             rate: f64::NAN,
             held_s: 0.0,
+        }
+    }
+
+    /// The capsules' gains the relative coordinate is taken across (m/s^2
+    /// per T/m; None: equal gains, the model's). One gradient moves
+    /// capsule i by g_i u, so the motion the gradient makes (the centre
+    /// law's, the dither's own) is along g; the coordinate the dither
+    /// holds is the drag direction less its component along g, so that
+    /// it sees none of that motion. With equal gains the drag direction
+    /// (zero mean) is already across it; with gains 15 % apart it is not,
+    /// and the dither's own 3 mm/s read as a relative drift the hold could
+    /// not stop (docs/decisions.md).
+    pub fn set_gains(&mut self, gains: Option<&[f64]>) {
+        self.direction = self.drag_direction;
+        let Some(g) = gains else {
+            return;
+        };
+        let m = NX / 2;
+        let norm2: f64 = g.iter().take(m).map(|x| x * x).sum();
+        if !(norm2.is_finite() && norm2 > 0.0) {
+            return;
+        }
+        let along: f64 = self
+            .drag_direction
+            .iter()
+            .zip(g)
+            .take(m)
+            .map(|(d, x)| d * x)
+            .sum::<f64>()
+            / norm2;
+        for (d, x) in self.direction.iter_mut().zip(g).take(m) {
+            *d -= along * x;
         }
     }
 
@@ -382,6 +418,43 @@ mod tests {
             let kappa = pattern_drag_gain(dt, gap);
             assert!(kappa > 0.09 && kappa < 0.172, "kappa {kappa}");
         }
+    }
+
+    /// Capsules whose gains differ: the motion one gradient makes (speeds
+    /// in the gains' ratio, here the dither's own 3 mm/s) is no relative
+    /// motion once the keeper is told the gains, and it is one to the
+    /// drag direction alone.
+    #[test]
+    fn the_relative_coordinate_is_taken_across_the_gains() {
+        let (g1, g2) = (173.2 * 1.15, 173.2 * 0.85);
+        let mut s = StationKeeper::<4>::new(&[134.7, 16.8]);
+        // Both capsules 0.1 mm and 3 mm/s per unit gain along one gradient.
+        let along = [
+            0.1e-3 * g1 / 173.2,
+            3e-3 * g1 / 173.2,
+            0.1e-3 * g2 / 173.2,
+            3e-3 * g2 / 173.2,
+        ];
+        assert!(!s.can_stop(&along, 0.02, 0.0, 2.0e-3, 1.0, 0.0));
+        s.set_gains(Some(&[g1, g2]));
+        assert!(s.along_direction(&[along[0], along[2]]).abs() < 1e-15);
+        assert!(s.can_stop(&along, 0.02, 0.0, 2.0e-3, 1.0, 0.0));
+        // A relative motion still counts.
+        let apart = [0.0, 1.0e-3, 0.0, -1.0e-3];
+        assert!(!s.can_stop(&apart, 0.02, 0.0, 2.0e-3, 1.0, 0.0));
+        // Equal gains: the drag direction as it was.
+        let before = StationKeeper::<4>::new(&[134.7, 16.8]);
+        s.set_gains(Some(&[173.2, 173.2]));
+        let (now, was) = (
+            s.along_direction(&[1e-3, -1e-3]),
+            before.along_direction(&[1e-3, -1e-3]),
+        );
+        assert!((now - was).abs() < 1e-12 * was.abs(), "{now} vs {was}");
+        s.set_gains(None);
+        assert_eq!(
+            s.along_direction(&[1e-3, -1e-3]),
+            before.along_direction(&[1e-3, -1e-3])
+        );
     }
 
     /// The learned drag factors scale the dither's authority: 1 on the
