@@ -10,7 +10,7 @@
 //! --odd`'s 550 such runs: every one, worst 6.95 s; here 120 runs, median
 //! 1.75 s, worst 7.74 s: gains x1.04 / x0.97, held from 2.05 s while the
 //! capsules drift apart to the band's edge, left at 7.54 s) and the median
-//! settle stays within `MEDIAN_BOUND_S` (measured 1.38-1.68 s over those
+//! settle stays within `MEDIAN_BOUND_S` (measured 1.38-1.67 s over those
 //! 550). A constant bias is left out: the hold
 //! cannot keep two capsules inside the band against its relative part
 //! (docs/known-limits.md, "Station keeping under a constant bias").
