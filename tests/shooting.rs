@@ -56,6 +56,31 @@ fn median(v: &[f64]) -> f64 {
     v[v.len() / 2]
 }
 
+/// Runs the 1 cm grid over +-3 cm under ideal sampling on each plant
+/// (drag factors, gain factors) and asserts its median ratio to the
+/// model's minimum time and its worst settle.
+fn plants_settle_on_the_grid(
+    plants: impl IntoIterator<Item = (Vec<f64>, Vec<f64>)>,
+    max_median_ratio: f64,
+    max_worst_s: f64,
+) {
+    for (drag_scale, gain_scale) in plants {
+        let plant = PlantMismatch {
+            drag_scale,
+            gain_scale,
+        };
+        let runs = grid_runs(0.01, 0.03, None, &plant);
+        let m = runs[runs.len() / 2].0;
+        let worst_s = runs.iter().map(|r| r.1).fold(0.0, f64::max);
+        println!("{plant:?}: median ratio {m:.3}, worst settle {worst_s:.3} s");
+        assert!(m <= max_median_ratio, "{plant:?}: median ratio {m}");
+        assert!(
+            worst_s <= max_worst_s,
+            "{plant:?}: worst settle {worst_s} s"
+        );
+    }
+}
+
 #[test]
 fn shots_settle_off_lattice_targets_near_minimum_time() {
     for (step_m, range_m) in [(0.011, 0.033), (0.0075, 0.0375)] {
@@ -94,18 +119,7 @@ fn capsules_off_the_model_settle_near_minimum_time_under_ideal_sampling() {
         (vec![1.0], vec![1.1]),
         (vec![1.0], vec![0.9, 1.1]),
     ];
-    for (drag_scale, gain_scale) in plants {
-        let plant = PlantMismatch {
-            drag_scale,
-            gain_scale,
-        };
-        let runs = grid_runs(0.01, 0.03, None, &plant);
-        let m = runs[runs.len() / 2].0;
-        let worst_s = runs.iter().map(|r| r.1).fold(0.0, f64::max);
-        println!("{plant:?}: median ratio {m:.3}, worst settle {worst_s:.3} s");
-        assert!(m <= 1.2, "{plant:?}: median ratio {m}");
-        assert!(worst_s <= 2.2, "{plant:?}: worst settle {worst_s} s");
-    }
+    plants_settle_on_the_grid(plants, 1.2, 2.2);
 }
 
 /// Capsules farther off than the controller is told (gain 10 %, drag 20 %
@@ -125,16 +139,5 @@ fn capsules_beyond_their_told_uncertainty_settle_under_ideal_sampling() {
         (vec![1.3, 0.7], vec![0.8]),
         (vec![0.7], vec![1.15, 0.85]),
     ];
-    for (drag_scale, gain_scale) in plants {
-        let plant = PlantMismatch {
-            drag_scale,
-            gain_scale,
-        };
-        let runs = grid_runs(0.01, 0.03, None, &plant);
-        let m = runs[runs.len() / 2].0;
-        let worst_s = runs.iter().map(|r| r.1).fold(0.0, f64::max);
-        println!("{plant:?}: median ratio {m:.3}, worst settle {worst_s:.3} s");
-        assert!(m <= 1.35, "{plant:?}: median ratio {m}");
-        assert!(worst_s <= 2.0, "{plant:?}: worst settle {worst_s} s");
-    }
+    plants_settle_on_the_grid(plants, 1.35, 2.0);
 }
