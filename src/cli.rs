@@ -286,6 +286,20 @@ pub struct SimulateArgs {
         value_name = "X1,X2,..."
     )]
     pub start: Option<Vec<f64>>,
+    /// A new target state x1,v1,x2,v2,... in m and m/s that the host sets
+    /// at `--retarget-at`, wherever the capsules are then (moving or not);
+    /// the settle metrics refer to it.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        value_name = "X1,V1,X2,V2,...",
+        requires = "retarget_at"
+    )]
+    pub retarget: Option<Vec<f64>>,
+    /// When the host sets `--retarget`, s from the start.
+    #[arg(long, value_name = "S", requires = "retarget")]
+    pub retarget_at: Option<f64>,
     #[command(flatten)]
     pub plant: PlantArgs,
     #[arg(long, value_enum, default_value = "variable")]

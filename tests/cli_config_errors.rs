@@ -282,3 +282,44 @@ fn calibrated_std_is_refused_out_of_range_or_without_factors() {
         assert_one_line_error(&out, needle);
     }
 }
+
+/// `--retarget` / `--retarget-at` are checked before anything runs: the
+/// change must fall within the run, the new target must be a rest state
+/// of the config's length inside the workspace.
+#[test]
+fn a_retarget_is_refused_outside_the_run_or_the_workspace() {
+    let cases: [(&str, &str, &str); 5] = [
+        (
+            "0.02,0,-0.01,0",
+            "3",
+            "retarget at 3 s: the target can change only during the run, [0, 3) s",
+        ),
+        (
+            "0.02,0,-0.01,0",
+            "NaN",
+            "retarget at NaN s: the target can change only during the run",
+        ),
+        (
+            "0.02,0,-0.01",
+            "1",
+            "retarget has 3 entries; the config has 4 states",
+        ),
+        (
+            "0.02,0,-0.09,0",
+            "1",
+            "capsule 2 at -0.09 m is outside the workspace [-0.06, 0.06] m by 0.0300 m",
+        ),
+        (
+            "0.02,0.1,-0.01,0",
+            "1",
+            "target speeds [0.1, 0.0] m/s are not 0",
+        ),
+    ];
+    for (target, at_s, needle) in cases {
+        let out = bin()
+            .args(["simulate", "--retarget", target, "--retarget-at", at_s])
+            .output()
+            .unwrap();
+        assert_one_line_error(&out, needle);
+    }
+}

@@ -143,7 +143,9 @@ class Run:
     ``estimated_factors`` (per capsule, the controller's estimate of its
     gain and drag factors against the model, with standard deviations),
     ``timing`` (under the scanner cycle: ``tracking_time_s``,
-    ``extra_delay_s`` and ``lose_every`` as simulated);
+    ``extra_delay_s`` and ``lose_every`` as simulated), ``retarget`` (when
+    the target changed: ``at_s`` and ``first_target``; ``target`` is the
+    final one);
     ``to_json()`` is the CLI's
     JSON."""
 
@@ -162,6 +164,7 @@ class Run:
         self.plant = d.get("plant")
         self.modes = d.get("modes") or []
         self.estimated_factors = d.get("estimated_factors")
+        self.retarget = d.get("retarget")
 
     @property
     def settle_time_s(self) -> Optional[float]:
@@ -195,6 +198,8 @@ def simulate(
     calibrated_std: Optional[float] = None,
     extra_delay_s: Optional[float] = None,
     lose_every: Optional[int] = None,
+    retarget: Optional[Sequence[float]] = None,
+    retarget_at_s: Optional[float] = None,
 ) -> Run:
     """One closed-loop run in the plant simulator, from rest at ``start``
     (positions, m; the origin when None) to ``target`` (M positions in m,
@@ -210,7 +215,9 @@ def simulate(
     fraction; None: 0.03). Odd timing under the scanner cycle:
     ``extra_delay_s`` after each tracking phase (s; None: the config's) and
     ``lose_every`` N-th tracking frame lost (None: none lost; 1 loses them
-    all).
+    all). ``retarget`` (as ``target``) replaces the target at
+    ``retarget_at_s`` s, wherever the capsules are then; the metrics refer
+    to it.
     Releases the GIL while it runs. ``ValueError`` names a bad argument."""
     cfg = _config(config)
     scale = lambda s: None if s is None else [float(v) for v in np.atleast_1d(s)]
@@ -232,6 +239,8 @@ def simulate(
         None if calibrated_std is None else float(calibrated_std),
         None if extra_delay_s is None else float(extra_delay_s),
         None if lose_every is None else _count("lose_every", lose_every),
+        None if retarget is None else _target_state(retarget, cfg.capsule_count),
+        None if retarget_at_s is None else float(retarget_at_s),
     )
     return Run(text)
 

@@ -45,6 +45,7 @@ class Run:
     plant: Optional[Dict]
     modes: List[Dict]
     estimated_factors: Optional[List[Dict]]
+    retarget: Optional[Dict]
     @property
     def settle_time_s(self) -> Optional[float]: ...
     def to_json(self) -> str: ...
@@ -68,6 +69,8 @@ def simulate(
     calibrated_std: Optional[float] = ...,
     extra_delay_s: Optional[float] = ...,
     lose_every: Optional[int] = ...,
+    retarget: Optional[Sequence[float]] = ...,
+    retarget_at_s: Optional[float] = ...,
 ) -> Run: ...
 
 class ReachMap:

@@ -10,7 +10,7 @@ use capsule_mpc_generator::config::{
 use capsule_mpc_generator::model::Model;
 use capsule_mpc_runtime::controller::{ControllerSettings, CycleOutput, Sampling as RtSampling};
 use capsule_mpc_runtime::{Controller as RtController, RuntimeError};
-use capsule_mpc_sim::closed_loop::{told_factors, Sampling};
+use capsule_mpc_sim::closed_loop::{told_factors, Retarget, Sampling};
 use capsule_mpc_sim::mismatch::PlantMismatch;
 use capsule_mpc_sim::plant::{disturbance_kind_from_name, DisturbanceLevel};
 use capsule_mpc_sim::reach::{reach_map, ReachOptions, ReachSummary};
@@ -150,7 +150,7 @@ fn refine_of(name: &str) -> PyResult<RefineMode> {
 /// One closed-loop run: the CLI's `simulate --json` report as a string.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale, shooting, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None, extra_delay_s = None, lose_every = None))]
+#[pyo3(signature = (config, target, start, sampling, disturbance, disturbance_model, seed, duration_s, refine, plant_drag_scale, plant_gain_scale, shooting, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None, extra_delay_s = None, lose_every = None, retarget = None, retarget_at_s = None))]
 fn simulate_json(
     py: Python<'_>,
     config: &PyConfig,
@@ -170,8 +170,19 @@ fn simulate_json(
     calibrated_std: Option<f64>,
     extra_delay_s: Option<f64>,
     lose_every: Option<usize>,
+    retarget: Option<Vec<f64>>,
+    retarget_at_s: Option<f64>,
 ) -> PyResult<String> {
     let mut r = SimulateRequest::new(target, "custom");
+    r.retarget = match (retarget, retarget_at_s) {
+        (Some(target), Some(at_s)) => Some(Retarget { at_s, target }),
+        (None, None) => None,
+        _ => {
+            return Err(value_error(
+                "retarget and retarget_at_s go together: the new target and when it is set",
+            ))
+        }
+    };
     r.extra_delay_s = extra_delay_s;
     r.lose_every = lose_every;
     r.shooting = shooting;

@@ -113,6 +113,31 @@ def test_odd_timing_errors_name_the_argument():
         cm.simulate([0.02, -0.01], sampling="ideal", extra_delay_s=0.005)
 
 
+def test_a_target_changed_mid_run_is_the_cli_bit_for_bit(tmp_path):
+    out = tmp_path / "run.json"
+    subprocess.run(
+        [CLI, "simulate", "--target", "0.02,0,0.03,0", "--retarget", "0.02,0,-0.01,0",
+         "--retarget-at", "0.2", "--sampling", "constant", "--seed", "3", "--duration", "4",
+         "--json", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    cli = json.loads(out.read_text())
+    py = cm.simulate([0.02, 0.03], sampling="constant", seed=3, duration_s=4.0,
+                     retarget=[0.02, -0.01], retarget_at_s=0.2)
+    assert py.u.tolist() == cli["u"]
+    assert py.retarget == cli["retarget"] == {"at_s": 0.2, "first_target": [0.02, 0.0, 0.03, 0.0]}
+    assert py.target.tolist() == [0.02, 0.0, -0.01, 0.0]
+    assert py.settle_time_s is not None and py.settle_time_s < 2.0
+    assert cm.simulate([0.02, 0.03]).retarget is None
+    with pytest.raises(ValueError, match="retarget and retarget_at_s go together"):
+        cm.simulate([0.02, 0.03], retarget=[0.02, -0.01])
+    with pytest.raises(ValueError, match=r"retarget at 3.5 s: the target can change only during the run, \[0, 3\) s"):
+        cm.simulate([0.02, 0.03], retarget=[0.02, -0.01], retarget_at_s=3.5)
+    with pytest.raises(ValueError, match="retarget .* capsule 2 at -0.09 m is outside the workspace"):
+        cm.simulate([0.02, 0.03], retarget=[0.02, -0.09], retarget_at_s=1.0)
+
+
 def test_bad_target_length():
     with pytest.raises(ValueError, match="target has 3 entries"):
         cm.simulate([0.01, 0.02, 0.03])

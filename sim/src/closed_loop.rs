@@ -7,7 +7,7 @@ use crate::mismatch::PlantMismatch;
 use crate::plant::{Phase, Plant};
 use crate::report::{
     CalibratedReport, FactorEstimate, FrameCounts, MeasurementRecord, ModeChange, ModelParams,
-    PlantReport, RunReport, ScannerTiming, TierCycles,
+    PlantReport, RetargetReport, RunReport, ScannerTiming, TierCycles,
 };
 use anyhow::{bail, Context, Result};
 use capsule_mpc_generator::config::{Config, DisturbanceConfig, RefineMode};
@@ -415,11 +415,31 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
     set_target_or_explain(&mut ctl, &target, "target")?;
     let retarget: Option<(f64, [f64; NX])> = match &opts.retarget {
         Some(r) => {
-            let t: [f64; NX] = r
-                .target
-                .as_slice()
-                .try_into()
-                .with_context(|| format!("retarget needs {NX} entries"))?;
+            if !(r.at_s.is_finite() && r.at_s >= 0.0 && r.at_s < opts.duration_s) {
+                bail!(
+                    "retarget at {} s: the target can change only during the run, [0, {}) s",
+                    r.at_s,
+                    opts.duration_s
+                );
+            }
+            let Ok(t) = <[f64; NX]>::try_from(r.target.as_slice()) else {
+                bail!(
+                    "retarget has {} entries; the config has {NX} states (x, v per capsule)",
+                    r.target.len()
+                );
+            };
+            if t.iter().any(|v| !v.is_finite()) {
+                bail!("retarget {t:?} is not finite");
+            }
+            check_in_workspace::<S, NX, K>("retarget", &t)
+                .with_context(|| format!("retarget {t:?} m"))?;
+            if t.iter().skip(1).step_by(2).any(|&v| v != 0.0) {
+                return Err(explain::<S, NX, K>(
+                    capsule_mpc_runtime::RuntimeError::TargetNotAtRest,
+                    &t,
+                ))
+                .with_context(|| format!("retarget {t:?} m"));
+            }
             Some((r.at_s, t))
         }
         None => None,
@@ -559,6 +579,10 @@ fn run_with<S: PlanSolver<NX, K>, const NX: usize, const K: usize>(
             std: opts.known_factor_std,
         });
     }
+    report.retarget = retarget.map(|(at_s, _)| RetargetReport {
+        at_s,
+        first_target: target.to_vec(),
+    });
     report.sampling = Some(opts.sampling.name().to_string());
     report.seed = Some(opts.seed);
     report.fallback_cycles = Some(statuses.fallback);

@@ -89,6 +89,10 @@ pub struct RunReport {
     /// Factors the controller was told (None: it started from the model).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibrated: Option<CalibratedReport>,
+    /// The target the run started towards and when the host changed it
+    /// to `target` (None: the target never changed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retarget: Option<RetargetReport>,
     /// Scenario name ("A", "C", "custom", ...).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario: Option<String>,
@@ -124,6 +128,16 @@ pub struct RunReport {
     /// against the model at the end of the run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimated_factors: Option<Vec<FactorEstimate>>,
+}
+
+/// A target change during the run: the settle metrics refer to the
+/// final target (`RunReport::target`) and count from the run's start.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RetargetReport {
+    /// When the host set the final target, s.
+    pub at_s: f64,
+    /// The target before it, [x1, v1, x2, v2, ...], m and m/s.
+    pub first_target: Vec<f64>,
 }
 
 /// One capsule's estimated factors on its gain and drag (1 = the model),
@@ -194,6 +208,7 @@ impl RunReport {
             metrics,
             plant: None,
             calibrated: None,
+            retarget: None,
             scenario: None,
             sampling: None,
             fallback_cycles: None,

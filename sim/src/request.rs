@@ -2,7 +2,7 @@
 //! Python package take it: both build the run's options here, so the same
 //! arguments give the same run, bit for bit.
 
-use crate::closed_loop::{run, Preset, RunOptions, Sampling};
+use crate::closed_loop::{run, Preset, Retarget, RunOptions, Sampling};
 use crate::mismatch::PlantMismatch;
 use crate::plant::{disturbance_kind_name, DisturbanceLevel};
 use crate::report::RunReport;
@@ -20,6 +20,8 @@ pub struct SimulateRequest {
     pub scenario: String,
     /// Start positions, m (empty: the origin).
     pub start_m: Vec<f64>,
+    /// A new target set during the run (None: `target` to the end).
+    pub retarget: Option<Retarget>,
     pub sampling: Sampling,
     pub disturbance: DisturbanceLevel,
     pub disturbance_kind: DisturbanceKind,
@@ -53,6 +55,7 @@ impl SimulateRequest {
             target,
             scenario: scenario.to_string(),
             start_m: Vec::new(),
+            retarget: None,
             sampling: Sampling::Variable,
             disturbance: DisturbanceLevel::Paper,
             disturbance_kind: DisturbanceKind::Random,
@@ -107,6 +110,7 @@ impl SimulateRequest {
         }
         let mut opts = RunOptions::new(config, self.target.clone(), self.sampling);
         opts.start_m = self.start_m.clone();
+        opts.retarget = self.retarget.clone();
         opts.duration_s = self.duration_s;
         opts.seed = self.seed;
         opts.disturbance =

@@ -25,6 +25,11 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         args.scenario_name(),
     );
     request.start_m = args.start_positions(model.capsule_count())?;
+    request.retarget = args
+        .retarget
+        .clone()
+        .zip(args.retarget_at)
+        .map(|(target, at_s)| capsule_mpc_sim::closed_loop::Retarget { at_s, target });
     request.sampling = sampling;
     request.disturbance = disturbance;
     request.disturbance_kind = DisturbanceKind::from(args.disturbance_model);

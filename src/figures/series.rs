@@ -225,6 +225,7 @@ mod tests {
             tier_cycles: None,
             plant: None,
             calibrated: None,
+            retarget: None,
             frames: None,
             timing: None,
             modes: None,
