@@ -298,7 +298,12 @@ pub struct SimulateArgs {
     )]
     pub retarget: Option<Vec<f64>>,
     /// When the host sets `--retarget`, s from the start.
-    #[arg(long, value_name = "S", requires = "retarget")]
+    #[arg(
+        long,
+        value_name = "S",
+        requires = "retarget",
+        allow_hyphen_values = true
+    )]
     pub retarget_at: Option<f64>,
     #[command(flatten)]
     pub plant: PlantArgs,

@@ -288,7 +288,12 @@ fn calibrated_std_is_refused_out_of_range_or_without_factors() {
 /// of the config's length inside the workspace.
 #[test]
 fn a_retarget_is_refused_outside_the_run_or_the_workspace() {
-    let cases: [(&str, &str, &str); 5] = [
+    let cases: [(&str, &str, &str); 6] = [
+        (
+            "0.02,0,-0.01,0",
+            "-0.5",
+            "retarget at -0.5 s: the target can change only during the run, [0, 3) s",
+        ),
         (
             "0.02,0,-0.01,0",
             "3",

@@ -52,8 +52,13 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let report = request.run(&config)?;
     let m = &report.metrics;
     crate::out!(
-        "scenario {} ({} sampling, {:?} preset, disturbance {}, seed {}): settle {}{}{} | in band {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
+        "scenario {}{} ({} sampling, {:?} preset, disturbance {}, seed {}): settle {}{}{} | in band {} | final error {:.3} mm | max |u| {:.1} mT/m | duty {:.2} ({:.2} until settled) | bound violations {} | max step {:.1} us",
         args.scenario_name(),
+        report.retarget.as_ref().map_or(String::new(), |r| format!(
+            ", target changed at {:.3} s to {:?} m",
+            r.at_s,
+            report.target.iter().step_by(2).collect::<Vec<_>>()
+        )),
         sampling.name(),
         preset,
         report.disturbance.as_deref().unwrap_or("none"),
