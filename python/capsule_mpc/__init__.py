@@ -249,7 +249,9 @@ class ReachMap:
     """Every target of a grid: ``targets_m`` (P, M), ``settle_time_s``,
     ``min_time_bound_s`` and ``ratio`` (P,) with NaN where refused or never
     settled, ``schedule_min_time_s`` and ``schedule_ratio`` against the
-    played schedule's minimum time (constant sampling: the coasted plan), and for two capsules the same as grids (``grid_*``, first
+    played schedule's minimum time (constant sampling: the coasted plan),
+    ``workspace_excursion_m`` (how far a capsule went outside the config's
+    workspace on the way, 0 inside, NaN where refused), and for two capsules the same as grids (``grid_*``, first
     capsule's position along axis 0); ``summary`` is the CLI's."""
 
     def __init__(self, text: str, axis_cm: np.ndarray):
@@ -265,6 +267,7 @@ class ReachMap:
         self.ratio = np.asarray([val(p, "settle_over_bound") for p in pts])
         self.schedule_min_time_s = np.asarray([val(p, "schedule_min_time_s") for p in pts])
         self.schedule_ratio = np.asarray([val(p, "settle_over_schedule_bound") for p in pts])
+        self.workspace_excursion_m = np.asarray([val(p, "workspace_excursion_m") for p in pts])
         self.axis_m = axis_cm / 100.0
         if self.targets_m.shape[1:] == (2,):
             n = len(self.axis_m)

@@ -81,6 +81,7 @@ class ReachMap:
     ratio: np.ndarray
     schedule_min_time_s: np.ndarray
     schedule_ratio: np.ndarray
+    workspace_excursion_m: np.ndarray
     axis_m: np.ndarray
     grid_settle_time_s: np.ndarray
     grid_min_time_bound_s: np.ndarray

@@ -202,6 +202,17 @@ def test_reach_map_grids():
     assert "24 targets" in m.summary_line()
 
 
+def test_reach_reports_how_far_the_way_leaves_the_workspace():
+    # Both capsules to (6, 6) cm: the large one swings about 4 cm past the
+    # +-6 cm workspace (docs/known-limits.md).
+    m = cm.reach(range_cm=6.0, step_cm=3.0)
+    e = m.workspace_excursion_m
+    assert e.shape == (24,) and np.all(e >= 0.0)
+    assert m.summary["left_workspace"] == int(np.sum(e > 0.0)) > 0
+    assert m.summary["worst_workspace_excursion_m"] == e.max() > 0.03
+    assert m.summary["worst_excursion_target_m"] == m.targets_m[np.argmax(e)].tolist()
+
+
 @pytest.mark.skipif(not os.path.exists(CLI), reason="the CLI is not built (cargo build --release)")
 def test_reach_under_drift_and_delay_is_the_cli(tmp_path):
     out = tmp_path / "reach.json"

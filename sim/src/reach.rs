@@ -87,6 +87,9 @@ pub struct ReachPoint {
     /// labelled as such.
     pub held_settle_time_s: Option<f64>,
     pub final_position_error_m: Option<f64>,
+    /// How far a capsule went outside the config's workspace on the way,
+    /// m (0: it stayed inside; `Metrics::workspace_excursion_m`).
+    pub workspace_excursion_m: Option<f64>,
 }
 
 /// Figures over a reach map (worst cases, not means of the easy ones).
@@ -104,6 +107,13 @@ pub struct ReachSummary {
     pub worst_ratio_target_m: Option<Vec<f64>>,
     pub median_settle_time_s: Option<f64>,
     pub worst_settle_time_s: Option<f64>,
+    /// Targets on whose way a capsule left the workspace, and the farthest
+    /// it went outside, m, with that target (the plans keep the capsules'
+    /// errors to the target within the state bound, not their positions
+    /// within the workspace: docs/known-limits.md).
+    pub left_workspace: usize,
+    pub worst_workspace_excursion_m: Option<f64>,
+    pub worst_excursion_target_m: Option<Vec<f64>>,
 }
 
 /// The grid's targets (positions only), row-major with the first capsule
@@ -226,6 +236,7 @@ pub fn reach_map(
                         settle_over_schedule_bound: m.settle_over_schedule_bound,
                         held_settle_time_s: m.settle_held_s,
                         final_position_error_m: Some(m.final_position_error_m),
+                        workspace_excursion_m: Some(m.workspace_excursion_m),
                     }
                 }
                 Err(e) => ReachPoint {
@@ -238,6 +249,7 @@ pub fn reach_map(
                     settle_over_schedule_bound: None,
                     held_settle_time_s: None,
                     final_position_error_m: None,
+                    workspace_excursion_m: None,
                 },
             };
             tick();
@@ -268,6 +280,10 @@ impl ReachSummary {
             .collect();
         let worst = ratios.iter().max_by(|a, b| a.0.total_cmp(&b.0));
         let settles: Vec<f64> = points.iter().filter_map(|p| p.settle_time_s).collect();
+        let farthest = points
+            .iter()
+            .filter_map(|p| p.workspace_excursion_m.map(|e| (e, p)))
+            .max_by(|a, b| a.0.total_cmp(&b.0));
         let schedule_ratios: Vec<f64> = points
             .iter()
             .filter_map(|p| p.settle_over_schedule_bound)
@@ -286,6 +302,12 @@ impl ReachSummary {
             worst_ratio_target_m: worst.map(|w| w.1.target_m.clone()),
             median_settle_time_s: median(settles.clone()),
             worst_settle_time_s: settles.into_iter().reduce(f64::max),
+            left_workspace: points
+                .iter()
+                .filter(|p| p.workspace_excursion_m.is_some_and(|e| e > 0.0))
+                .count(),
+            worst_workspace_excursion_m: farthest.map(|f| f.0),
+            worst_excursion_target_m: farthest.filter(|f| f.0 > 0.0).map(|f| f.1.target_m.clone()),
         }
     }
 }
@@ -322,7 +344,7 @@ mod tests {
     #[test]
     fn medians_and_worst_cases() {
         let p = |r: Option<f64>, s: Option<f64>, refused: bool| ReachPoint {
-            target_m: vec![0.01],
+            target_m: vec![s.unwrap_or(0.0)],
             refused: refused.then(|| "x".to_string()),
             settle_time_s: s,
             min_time_bound_s: None,
@@ -331,10 +353,16 @@ mod tests {
             settle_over_schedule_bound: r,
             held_settle_time_s: s,
             final_position_error_m: None,
+            workspace_excursion_m: (!refused).then_some(0.0),
+        };
+        // The slower run went 2 mm outside the workspace on its way.
+        let out = ReachPoint {
+            workspace_excursion_m: Some(0.002),
+            ..p(Some(1.5), Some(0.9), false)
         };
         let s = ReachSummary::of(&[
             p(Some(1.0), Some(0.5), false),
-            p(Some(1.5), Some(0.9), false),
+            out,
             p(None, None, false),
             p(None, None, true),
         ]);
@@ -342,5 +370,13 @@ mod tests {
         assert_eq!(s.median_settle_over_bound, Some(1.25));
         assert_eq!(s.worst_settle_over_bound, Some(1.5));
         assert_eq!(s.worst_settle_time_s, Some(0.9));
+        assert_eq!(s.left_workspace, 1);
+        assert_eq!(s.worst_workspace_excursion_m, Some(0.002));
+        assert_eq!(s.worst_excursion_target_m, Some(vec![0.9]));
+        // A grid that stays inside names no target.
+        let inside = ReachSummary::of(&[p(Some(1.0), Some(0.5), false)]);
+        assert_eq!(inside.left_workspace, 0);
+        assert_eq!(inside.worst_workspace_excursion_m, Some(0.0));
+        assert_eq!(inside.worst_excursion_target_m, None);
     }
 }

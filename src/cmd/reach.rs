@@ -99,6 +99,17 @@ pub fn run(args: &ReachArgs) -> Result<()> {
         fmt(summary.median_settle_time_s),
         fmt(summary.worst_settle_time_s),
     )?;
+    if let (Some(e), Some(t)) = (
+        summary.worst_workspace_excursion_m,
+        &summary.worst_excursion_target_m,
+    ) {
+        crate::out!(
+            "on the way a capsule left the workspace for {} of the targets, by up to {:.1} mm (at {:?} cm)",
+            summary.left_workspace,
+            e * 1e3,
+            t.iter().map(|v| v * 100.0).collect::<Vec<_>>()
+        )?;
+    }
     if sampling == Sampling::Constant {
         crate::out!(
             "settle / coasted-schedule minimum time (constant sampling's own bound, {} targets on its plan grid): median {} worst {}",

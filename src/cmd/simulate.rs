@@ -123,6 +123,13 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             ))
         )?;
     }
+    if m.workspace_excursion_m > 0.0 {
+        // The plans bound the errors to the target, not the positions.
+        crate::out!(
+            "on the way a capsule left the workspace by {:.1} mm (config section [workspace]; docs/known-limits.md)",
+            m.workspace_excursion_m * 1e3
+        )?;
+    }
     if let Some(path) = &args.json {
         report.write_json(path)?;
     }
