@@ -170,7 +170,9 @@ int32_t capsule_mpc_reset(capsule_mpc_t *handle, const double *positions_m, size
  * workspace the solver was generated for (default [-0.06, 0.06] m), else
  * TARGET_OUT_OF_RANGE. Reached from wherever the capsules are, moving or
  * not, through waypoints (chained stored plans) when one plan is not
- * enough. */
+ * enough. The way there is not bounded by the workspace: a minimum-time
+ * move swings the low-drag capsule past its target, for the default config
+ * up to about 4-6 cm outside (docs/known-limits.md). */
 int32_t capsule_mpc_set_target(capsule_mpc_t *handle, const double *target, size_t n);
 
 /* CAPSULE_MPC_SAMPLING_*; restarts the estimate at rest at the current

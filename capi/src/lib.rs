@@ -322,7 +322,10 @@ pub unsafe extern "C" fn capsule_mpc_reset(
 /// Sets the target state `[x1, v1, x2, v2, ...]` (`n` = 2 x capsules; SI).
 /// The speeds must be 0 (TARGET_NOT_AT_REST otherwise: the plans end at
 /// rest). Refused with TARGET_OUT_OF_RANGE when the stored plans do not
-/// cover it from the current estimate.
+/// cover it from the current estimate. Reached from wherever the capsules
+/// are, moving or not; the way there may leave the workspace (a
+/// minimum-time move swings the low-drag capsule past its target:
+/// docs/known-limits.md).
 ///
 /// # Safety
 /// `handle` as for `capsule_mpc_reset`; `target` must point to `n` doubles.
