@@ -1,4 +1,9 @@
-//! C ABI for the capsule-mpc runtime ([`capsule_mpc_runtime::DefaultController`]).
+//! C ABI for the capsule-mpc runtime: the two-capsule
+//! [`capsule_mpc_runtime::DefaultController`], or with the cargo feature
+//! `three-capsules` the [`capsule_mpc_runtime::ThreeCapsuleController`]
+//! (one controller per library build, as the generated crate holds one
+//! module per config; the header is the same, and hosts read the capsule
+//! count and sizes from `capsule_mpc_dimensions`).
 //!
 //! The caller owns all memory: it asks for [`capsule_mpc_workspace_size`] and
 //! [`capsule_mpc_workspace_align`], provides a buffer, and
@@ -19,9 +24,19 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 
 use capsule_mpc_runtime::controller::{ControllerSettings, Refine, Sampling};
-use capsule_mpc_runtime::generated::controller::Solver;
 use capsule_mpc_runtime::generated::{PlanSolver, Tier};
-use capsule_mpc_runtime::{DefaultController, RuntimeError, RuntimeStatus};
+use capsule_mpc_runtime::{RuntimeError, RuntimeStatus};
+
+#[cfg(not(feature = "three-capsules"))]
+use capsule_mpc_runtime::{
+    generated::controller::{spec, Solver},
+    DefaultController as LibController,
+};
+#[cfg(feature = "three-capsules")]
+use capsule_mpc_runtime::{
+    generated::three_capsules::{spec, Solver},
+    ThreeCapsuleController as LibController,
+};
 use core::mem::{align_of, size_of};
 use core::ptr;
 
@@ -71,8 +86,8 @@ pub const CAPSULE_MPC_STATUS_ABOVE_ITERATION_MAP: i32 = RuntimeStatus::AboveIter
 pub const CAPSULE_MPC_STATUS_RECOVERING: i32 = RuntimeStatus::Recovering as i32;
 
 const M: usize = <Solver as PlanSolver<NX, K>>::M;
-const NX: usize = capsule_mpc_runtime::generated::controller::spec::NX;
-const K: usize = capsule_mpc_runtime::generated::controller::spec::K;
+const NX: usize = spec::NX;
+const K: usize = spec::K;
 const N: usize = <Solver as PlanSolver<NX, K>>::N;
 
 /// "CAPSMPC1": written last by a successful init, checked by every call.
@@ -104,7 +119,7 @@ pub struct CapsuleMpc {
     /// A cycle ran since init or the last reset (the sampling mode is then
     /// fixed until the next reset).
     running: bool,
-    controller: DefaultController,
+    controller: LibController,
 }
 
 type Res = Result<(), i32>;
@@ -213,7 +228,7 @@ pub extern "C" fn capsule_mpc_workspace_align() -> usize {
 /// ones are refused with `CAPSULE_MPC_ERR_GAP_BEYOND_PROVEN`.
 #[no_mangle]
 pub extern "C" fn capsule_mpc_max_gap_s() -> f64 {
-    DefaultController::MAX_GAP_S
+    LibController::MAX_GAP_S
 }
 
 /// The build's dimensions, so a host checks it links what it expects.
@@ -276,7 +291,7 @@ pub unsafe extern "C" fn capsule_mpc_init(
         // SAFETY: read_array checks null, alignment and length.
         let p: [f64; M] = unsafe { read_array(positions_m, n_positions) }?;
         let controller =
-            DefaultController::new(DefaultController::default_settings(), &p).map_err(map_err)?;
+            LibController::new(LibController::default_settings(), &p).map_err(map_err)?;
         let ws = CapsuleMpc {
             magic: MAGIC,
             pending: Pending::Nothing,
@@ -450,7 +465,7 @@ fn rebuild(ws: &mut CapsuleMpc, settings: ControllerSettings) -> Res {
     for (i, p) in positions.iter_mut().enumerate() {
         *p = x[2 * i];
     }
-    let mut c = DefaultController::new(settings, &positions).map_err(map_err)?;
+    let mut c = LibController::new(settings, &positions).map_err(map_err)?;
     if let Some(t) = ws.controller.target() {
         c.set_target(t).map_err(map_err)?;
     }

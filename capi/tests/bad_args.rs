@@ -1,6 +1,9 @@
 //! Every exported function with bad arguments (error codes, nothing
 //! changes). The good path through the C functions is `good_path.rs`.
 
+// The two-capsule library (the default build).
+#![cfg(not(feature = "three-capsules"))]
+
 use capsule_mpc_capi::*;
 use core::ffi::c_void;
 use core::ptr::{null, null_mut};

@@ -2,6 +2,9 @@
 //! ABI under each sampling mode, and a wrong reset mid-run that the loop
 //! re-acquires.
 
+// The two-capsule library (the default build).
+#![cfg(not(feature = "three-capsules"))]
+
 use capsule_mpc_capi::*;
 
 #[path = "common/handle.rs"]

@@ -1,6 +1,9 @@
 //! `capsule_mpc_set_model_factors`: a calibration's factors, bad values
 //! refused with their code, a refused call changing nothing.
 
+// The two-capsule library (the default build).
+#![cfg(not(feature = "three-capsules"))]
+
 use capsule_mpc_capi::*;
 
 #[path = "common/handle.rs"]

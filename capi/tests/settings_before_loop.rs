@@ -3,6 +3,9 @@
 //! disturbance the estimator assumes); bad values refused with their code,
 //! a refused call changing nothing, and both refused once the loop runs.
 
+// The two-capsule library (the default build).
+#![cfg(not(feature = "three-capsules"))]
+
 use capsule_mpc_capi::*;
 
 #[path = "common/first_frame.rs"]

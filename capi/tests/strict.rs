@@ -3,6 +3,9 @@
 //! speeds, time stamps that go backwards or jump, tracking phases longer
 //! than the configured 20 ms, and a glitch after the loop has settled.
 
+// The two-capsule library (the default build).
+#![cfg(not(feature = "three-capsules"))]
+
 use capsule_mpc_capi::*;
 use core::ptr::null;
 
