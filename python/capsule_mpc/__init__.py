@@ -252,9 +252,10 @@ class ReachMap:
     played schedule's minimum time (constant sampling: the coasted plan),
     ``workspace_excursion_m`` (how far a capsule went outside the config's
     workspace on the way, 0 inside, NaN where refused), and for two capsules the same as grids (``grid_*``, first
-    capsule's position along axis 0); ``summary`` is the CLI's."""
+    capsule's offset from ``start_m`` along axis 0, ``axis_m`` the offsets);
+    ``summary`` is the CLI's."""
 
-    def __init__(self, text: str, axis_cm: np.ndarray):
+    def __init__(self, text: str, axis_cm: np.ndarray, start_m: np.ndarray):
         d = json.loads(text)
         pts = d["points"]
         self.summary = d["summary"]
@@ -268,13 +269,14 @@ class ReachMap:
         self.schedule_min_time_s = np.asarray([val(p, "schedule_min_time_s") for p in pts])
         self.schedule_ratio = np.asarray([val(p, "settle_over_schedule_bound") for p in pts])
         self.workspace_excursion_m = np.asarray([val(p, "workspace_excursion_m") for p in pts])
+        self.start_m = start_m
         self.axis_m = axis_cm / 100.0
         if self.targets_m.shape[1:] == (2,):
             n = len(self.axis_m)
             grids = {k: np.full((n, n), nan) for k in ("settle", "bound", "ratio")}
             for p, s, b, r in zip(self.targets_m, self.settle_time_s, self.min_time_bound_s, self.ratio):
-                i = int(np.argmin(np.abs(self.axis_m - p[0])))
-                j = int(np.argmin(np.abs(self.axis_m - p[1])))
+                i = int(np.argmin(np.abs(self.axis_m - (p[0] - start_m[0]))))
+                j = int(np.argmin(np.abs(self.axis_m - (p[1] - start_m[1]))))
                 grids["settle"][i, j], grids["bound"][i, j], grids["ratio"][i, j] = s, b, r
             self.grid_settle_time_s = grids["settle"]
             self.grid_min_time_bound_s = grids["bound"]
@@ -308,9 +310,11 @@ def reach(
     disturbance_model: str = "random",
     duration_s: Optional[float] = None,
     extra_delay_s: Optional[float] = None,
+    start: Optional[Sequence[float]] = None,
 ) -> ReachMap:
-    """The closed loop from rest at the origin to every target of the grid
-    (``range_cm`` half-width, ``step_cm`` spacing, per capsule) on both
+    """The closed loop from rest at ``start`` (positions, m; the origin
+    when None) to every target of the grid around it (``range_cm``
+    half-width, ``step_cm`` spacing, per capsule) on both
     cores; releases the GIL and prints nothing. ``shooting``, the plant's
     factors, the told (calibrated) ones, ``disturbance_model`` and
     ``extra_delay_s`` as for ``simulate``; ``duration_s`` per run (None:
@@ -333,9 +337,11 @@ def reach(
         disturbance_model,
         None if duration_s is None else float(duration_s),
         None if extra_delay_s is None else float(extra_delay_s),
+        None if start is None else [float(v) for v in start],
     )
     half = int(np.floor(range_cm / step_cm + 1e-9))
-    return ReachMap(text, np.arange(-half, half + 1) * float(step_cm))
+    start_m = np.zeros(cfg.capsule_count) if start is None else np.asarray(start, dtype=float)
+    return ReachMap(text, np.arange(-half, half + 1) * float(step_cm), start_m)
 
 
 class Calibration:

@@ -82,6 +82,7 @@ class ReachMap:
     schedule_min_time_s: np.ndarray
     schedule_ratio: np.ndarray
     workspace_excursion_m: np.ndarray
+    start_m: np.ndarray
     axis_m: np.ndarray
     grid_settle_time_s: np.ndarray
     grid_min_time_bound_s: np.ndarray
@@ -106,6 +107,7 @@ def reach(
     disturbance_model: str = ...,
     duration_s: Optional[float] = ...,
     extra_delay_s: Optional[float] = ...,
+    start: Optional[Sequence[float]] = ...,
 ) -> ReachMap: ...
 
 class Calibration:

@@ -206,7 +206,7 @@ fn simulate_json(
 
 /// The reach map: `{"points": [...], "summary": {...}}` as the CLI's JSON.
 #[pyfunction]
-#[pyo3(signature = (config, range_cm, step_cm, sampling, disturbance, seed, shooting, plant_drag_scale = None, plant_gain_scale = None, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None, disturbance_model = "random", duration_s = None, extra_delay_s = None))]
+#[pyo3(signature = (config, range_cm, step_cm, sampling, disturbance, seed, shooting, plant_drag_scale = None, plant_gain_scale = None, calibrated_drag_scale = None, calibrated_gain_scale = None, calibrated_std = None, disturbance_model = "random", duration_s = None, extra_delay_s = None, start = None))]
 #[allow(clippy::too_many_arguments)]
 fn reach_json(
     py: Python<'_>,
@@ -225,6 +225,7 @@ fn reach_json(
     disturbance_model: &str,
     duration_s: Option<f64>,
     extra_delay_s: Option<f64>,
+    start: Option<Vec<f64>>,
 ) -> PyResult<String> {
     if !(range_cm.is_finite() && range_cm >= 0.0) {
         return Err(value_error(format!(
@@ -246,7 +247,7 @@ fn reach_json(
         disturbance: DisturbanceLevel::from_name(disturbance).map_err(value_error)?,
         disturbance_kind: disturbance_kind_from_name(disturbance_model).map_err(value_error)?,
         seed,
-        start_m: Vec::new(),
+        start_m: start.unwrap_or_default(),
         duration_s,
         extra_delay_s,
         mismatch: PlantMismatch::from_scales(plant_drag_scale, plant_gain_scale),

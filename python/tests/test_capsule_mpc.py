@@ -202,6 +202,25 @@ def test_reach_map_grids():
     assert "24 targets" in m.summary_line()
 
 
+@pytest.mark.skipif(not os.path.exists(CLI), reason="the CLI is not built (cargo build --release)")
+def test_reach_from_a_start_is_the_cli(tmp_path):
+    out = tmp_path / "reach.json"
+    subprocess.run(
+        [CLI, "reach", "--start", "0.02,-0.01", "--range-cm", "1", "--step-cm", "1", "--json", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    cli = json.loads(out.read_text())
+    m = cm.reach(start=[0.02, -0.01], range_cm=1.0, step_cm=1.0)
+    assert m.summary == cli["summary"]
+    assert m.targets_m.tolist() == [p["target_m"] for p in cli["points"]]
+    assert m.start_m.tolist() == [0.02, -0.01]
+    # The grid is centred on the start: its centre cell is the start itself.
+    assert math.isnan(m.grid_ratio[1, 1]) and not np.isnan(m.grid_ratio[0, 2])
+    with pytest.raises(ValueError, match="start has 1 positions"):
+        cm.reach(start=[0.02], range_cm=1.0)
+
+
 def test_reach_reports_how_far_the_way_leaves_the_workspace():
     # Both capsules to (6, 6) cm: the large one swings about 4 cm past the
     # +-6 cm workspace (docs/known-limits.md).
