@@ -284,9 +284,64 @@ impl ScaleEstimate {
     }
 }
 
+/// The capsules' common gain factor, pooled over their estimates
+/// (weighted by the inverse of their variances), when it differs from the
+/// model's 1 by more than `sigmas` of its own deviation and every two
+/// capsules' gain estimates agree within `sigmas` deviations of their
+/// difference; else None. A capsule's gain is its magnetization over its
+/// mass: a material or a gradient calibration that is off moves every
+/// capsule's gain alike, and the pooled estimate tells it before each
+/// capsule's own does. Capsules whose gains the frames tell apart are not
+/// pooled.
+pub fn pooled_gain(scales: &[ScaleEstimate], sigmas: f64) -> Option<f64> {
+    let variance = |s: &ScaleEstimate| s.cov[0].max(GAIN_VARIANCE_FLOOR);
+    let agree = scales.iter().enumerate().all(|(i, a)| {
+        scales[i + 1..].iter().all(|b| {
+            libm::fabs(a.mean[0] - b.mean[0]) <= sigmas * libm::sqrt(variance(a) + variance(b))
+        })
+    });
+    let weight: f64 = scales.iter().map(|s| 1.0 / variance(s)).sum();
+    if !agree || scales.len() < 2 || !(weight > 0.0) {
+        return None;
+    }
+    let mean = scales.iter().map(|s| s.mean[0] / variance(s)).sum::<f64>() / weight;
+    (libm::fabs(mean - 1.0) > sigmas * libm::sqrt(1.0 / weight)).then_some(mean)
+}
+
+/// Least variance a gain estimate counts with in the pool (a deviation of
+/// 1e-6: far below any the frames reach, it only keeps the weights finite).
+const GAIN_VARIANCE_FLOOR: f64 = 1e-12;
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn gain_estimate(mean: f64, std: f64) -> ScaleEstimate {
+        ScaleEstimate {
+            mean: [mean, 1.0],
+            cov: [std * std, 0.0, 0.0, 0.04],
+            sens: [0.0; 4],
+        }
+    }
+
+    /// Two capsules each 1.5 deviations below the model are together more
+    /// than two below; one capsule, capsules that disagree, or a pool
+    /// within two deviations of 1 give nothing.
+    #[test]
+    fn the_pooled_gain_tells_a_common_error_before_each_capsule_does() {
+        let low = [gain_estimate(0.955, 0.03), gain_estimate(0.955, 0.03)];
+        assert!(low.iter().all(|s| s.significant(2.0)[0] == 1.0));
+        let pooled = pooled_gain(&low, 2.0).expect("significant together");
+        assert!((pooled - 0.955).abs() < 1e-12);
+        // The sharper estimate weighs more.
+        let mixed = [gain_estimate(0.95, 0.01), gain_estimate(0.97, 0.03)];
+        assert!((pooled_gain(&mixed, 2.0).unwrap() - 0.952).abs() < 1e-9);
+        assert_eq!(pooled_gain(&low[..1], 2.0), None);
+        let apart = [gain_estimate(1.0, 0.02), gain_estimate(1.2, 0.02)];
+        assert_eq!(pooled_gain(&apart, 2.0), None);
+        let near = [gain_estimate(0.98, 0.03), gain_estimate(0.99, 0.03)];
+        assert_eq!(pooled_gain(&near, 2.0), None);
+    }
 
     /// Deterministic pseudo-noise in [-1, 1] (no std, no rand).
     fn noise(k: u64) -> f64 {

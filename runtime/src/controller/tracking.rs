@@ -442,11 +442,22 @@ impl<S: PlanSolver<NX, K>, const NX: usize, const K: usize> Controller<S, NX, K>
     /// Takes up the factors that differ significantly from the model
     /// (`SCALE_SIGNIFICANCE` standard deviations): the estimate is moved
     /// by what the change of factors implies, and the refinement rolls
-    /// out on them.
+    /// out on them. Under the scanner cycle a capsule whose own gain is not
+    /// yet significant takes the capsules' pooled gain where that is
+    /// (`estimator::pooled_gain`); ideal sampling tells each capsule's
+    /// gain from full states within a few samples.
     pub(super) fn refresh_applied_scales(&mut self) {
         let mut changed = false;
+        let pooled = if self.settings.sampling == Sampling::Ideal {
+            None
+        } else {
+            pooled_gain(&self.est.scales[..NX / 2], SCALE_SIGNIFICANCE)
+        };
         for i in 0..NX / 2 {
-            let new = self.est.scales[i].significant(SCALE_SIGNIFICANCE);
+            let mut new = self.est.scales[i].significant(SCALE_SIGNIFICANCE);
+            if let Some(gain) = pooled.filter(|_| new[0] == 1.0) {
+                new[0] = gain;
+            }
             let old = self.est.applied_scales[i];
             if new != old {
                 let sens = self.est.scales[i].sens;
