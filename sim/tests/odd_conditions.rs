@@ -7,10 +7,10 @@
 //! The draw is seeded, so the runs are the same on every machine.
 //!
 //! Asserted: every run settles (measured on `docs/scripts/random_plants.py
-//! --odd`'s 550 such runs: every one, worst 6.95 s; here 120 runs, median
-//! 1.75 s, worst 7.74 s: gains x1.04 / x0.97, held from 2.05 s while the
+//! --odd`'s 550 such runs: every one, worst 7.82 s; here 120 runs, median
+//! 1.88 s, worst 7.74 s: gains x1.04 / x0.97, held from 2.05 s while the
 //! capsules drift apart to the band's edge, left at 7.54 s) and the median
-//! settle stays within `MEDIAN_BOUND_S` (measured 1.38-1.67 s over those
+//! settle stays within `MEDIAN_BOUND_S` (measured 1.44-1.69 s over those
 //! 550). A constant bias is left out: the hold
 //! cannot keep two capsules inside the band against its relative part
 //! (docs/known-limits.md, "Station keeping under a constant bias").
