@@ -301,7 +301,7 @@ pub fn pooled_gain(scales: &[ScaleEstimate], sigmas: f64) -> Option<f64> {
         })
     });
     let weight: f64 = scales.iter().map(|s| 1.0 / variance(s)).sum();
-    if !agree || scales.len() < 2 || !(weight > 0.0) {
+    if !agree || scales.len() < 2 || weight.is_nan() || weight <= 0.0 {
         return None;
     }
     let mean = scales.iter().map(|s| s.mean[0] / variance(s)).sum::<f64>() / weight;
