@@ -9,12 +9,15 @@
 //! every plant); every run settles within 6 s, on the model and off it;
 //! the nominal plant within 2.0 s (measured worst 1.19 s constant, 0.99 s
 //! variable); off the model the median is at most 1.3 x the nominal one
-//! under constant sampling (measured at most 1.08 x) and 1.6 x under
-//! variable sampling (measured at most 1.52 x: 1.20 s against 0.79 s), and
-//! at most `MAX_SLOW_RUNS` of a plant's 32 runs take longer than twice the
-//! nominal worst (measured at most 1, constant gain x0.9; variants of the
-//! end game that this bound rejects: docs/decisions.md).
-//! Issue 26 asks for 1.3 x under both: variable sampling not met yet.
+//! under constant sampling (measured at most 1.08 x) and, for a gain off
+//! both capsules alike, under variable sampling too (measured 1.14 x and
+//! 1.06 x; 1.39 x and 1.42 x before the capsules' pooled gain), and 1.6 x
+//! for the drag rows under variable sampling (measured at most 1.52 x:
+//! 1.20 s against 0.79 s), and at most `MAX_SLOW_RUNS` of a plant's 32
+//! runs take longer than twice the nominal worst (measured at most 1,
+//! constant gain x1.1; variants of the end game that this bound rejects:
+//! docs/decisions.md). Issue 26 asks for 1.3 x everywhere: the drag rows
+//! under variable sampling not met yet.
 //! Printed: settled
 //! runs and settle times per plant (docs/known-limits.md quotes them).
 
@@ -108,8 +111,8 @@ fn off_model_capsules_settle_near_the_nominal_times() {
                 nominal = (med, worst);
                 check(worst <= 2.0, format!("nominal worst {worst} s"));
             } else {
-                let ratio = match sampling {
-                    Sampling::Constant => 1.3,
+                let ratio = match (sampling, name.starts_with("gain")) {
+                    (Sampling::Constant, _) | (_, true) => 1.3,
                     _ => 1.6,
                 };
                 check(
