@@ -9,12 +9,14 @@
 
 use capsule_mpc_capi::*;
 
+#[path = "common/plant.rs"]
+#[allow(dead_code)] // its two-capsule entry point is the other tests'
+mod plant;
+
 /// Magnetic acceleration per gradient, (m/s^2)/(T/m).
 const G: [f64; 3] = [173.248, 173.248, 173.248];
 /// Quadratic drag coefficients, 1/m.
 const B: [f64; 3] = [134.713, 42.699, 16.839];
-/// Integration step, s.
-const STEP_S: f64 = 1e-3;
 /// Tracking phase, s (the config's).
 const TRACKING_S: f64 = 0.02;
 const TARGET: [f64; 6] = [0.02, 0.0, 0.0, 0.0, -0.01, 0.0];
@@ -22,29 +24,8 @@ const TARGET: [f64; 6] = [0.02, 0.0, 0.0, 0.0, -0.01, 0.0];
 #[repr(C, align(64))]
 struct Buf([u8; 1 << 17]);
 
-fn deriv(s: &[f64; 6], u: f64) -> [f64; 6] {
-    let mut d = [0.0; 6];
-    for i in 0..3 {
-        let v = s[2 * i + 1];
-        d[2 * i] = v;
-        d[2 * i + 1] = -B[i] * v * v.abs() + G[i] * u;
-    }
-    d
-}
-
 fn hold_for(s: &mut [f64; 6], u: f64, duration_s: f64) {
-    let add =
-        |a: &[f64; 6], k: &[f64; 6], c: f64| std::array::from_fn::<f64, 6, _>(|j| a[j] + c * k[j]);
-    for _ in 0..(duration_s / STEP_S).round() as usize {
-        let h = STEP_S;
-        let k1 = deriv(s, u);
-        let k2 = deriv(&add(s, &k1, h / 2.0), u);
-        let k3 = deriv(&add(s, &k2, h / 2.0), u);
-        let k4 = deriv(&add(s, &k3, h), u);
-        for j in 0..6 {
-            s[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
-        }
-    }
+    plant::hold_capsules_for(s, u, duration_s, &G, &B);
 }
 
 /// `n` with its digits grouped by spaces, as the docs write sizes.
