@@ -40,3 +40,18 @@ def pop_option(args, name):
     value = args[k + 1]
     del args[k:k + 2]
     return value
+
+
+def draw_arguments(args, flag):
+    """`BIN [RUNS] [DRAW_SEED] [--config FILE] [flag]` of the drawn-run
+    scripts: (binary, runs, seed, config, capsules, whether `flag` was
+    given)."""
+    config = pop_option(args, "--config")
+    given = flag in args
+    if given:
+        args.remove(flag)
+    binary = args[0]
+    runs = int(args[1]) if len(args) > 1 else 400
+    seed = int(args[2]) if len(args) > 2 else 1
+    capsules = 3 if config and "three" in config else 2
+    return binary, runs, seed, config, capsules, given

@@ -24,7 +24,7 @@ import random
 import sys
 from concurrent.futures import ThreadPoolExecutor
 
-from grid_runs import pop_option, simulate_args
+from grid_runs import draw_arguments, simulate_args
 
 NEVER_S = 99.0
 
@@ -80,15 +80,7 @@ def metrics(binary, config, run):
 
 
 def main():
-    args = sys.argv[1:]
-    config = pop_option(args, "--config")
-    odd = "--odd" in args
-    if odd:
-        args.remove("--odd")
-    binary = args[0]
-    runs = int(args[1]) if len(args) > 1 else 400
-    seed = int(args[2]) if len(args) > 2 else 1
-    capsules = 3 if config and "three" in config else 2
+    binary, runs, seed, config, capsules, odd = draw_arguments(sys.argv[1:], "--odd")
     plan = draw(runs, seed, capsules)
     if odd:
         add_odd_conditions(plan, seed, capsules)

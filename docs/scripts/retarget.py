@@ -18,7 +18,7 @@ import random
 import sys
 from concurrent.futures import ThreadPoolExecutor
 
-from grid_runs import pop_option, simulate_args
+from grid_runs import draw_arguments, simulate_args
 
 NEVER_S = 99.0
 
@@ -74,15 +74,7 @@ def summary(times):
 
 
 def main():
-    args = sys.argv[1:]
-    config = pop_option(args, "--config")
-    off_model = "--off-model" in args
-    if off_model:
-        args.remove("--off-model")
-    binary = args[0]
-    runs = int(args[1]) if len(args) > 1 else 400
-    seed = int(args[2]) if len(args) > 2 else 1
-    capsules = 3 if config and "three" in config else 2
+    binary, runs, seed, config, capsules, off_model = draw_arguments(sys.argv[1:], "--off-model")
     plan = draw(runs, seed, capsules, off_model)
     with ThreadPoolExecutor(2) as ex:
         pairs = list(ex.map(lambda r: settle_pair(binary, config, r), plan))
