@@ -567,6 +567,12 @@ mod tests {
             (edge - STATION_JUDGED_SPEED_M_PER_S).abs() < 1e-12,
             "{edge}"
         );
+        // Three capsules play at the judged speed wherever they are.
+        let mut three = StationKeeper::<6>::new(&[134.7, 16.8, 60.0]);
+        let e = [0.6e-3, 2.0e-3, -0.6e-3, -2.0e-3, 0.0, 0.0];
+        three.next_acceleration(&e, 0.02, 0.02, 1.0);
+        assert!(three.amplitude_m_per_s.abs() > 0.0);
+        assert!(three.amplitude_m_per_s.abs() <= STATION_JUDGED_SPEED_M_PER_S + 1e-12);
     }
 
     /// Two capsules, the first with more drag: a relative error with the
