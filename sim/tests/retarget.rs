@@ -13,7 +13,7 @@
 //! first arrival). Asserted: every changed run settles, and the time from
 //! the change to the settle is at the median no longer than the move from
 //! rest (`MEDIAN_RATIO_BOUND`; measured on `docs/scripts/retarget.py`'s
-//! 800 two-capsule runs: 0.65-1.56 s against 0.70-1.62 s, per sampling;
+//! 800 two-capsule runs: 0.65-1.56 s against 0.70-1.63 s, per sampling;
 //! here 1.00 s against 1.04 s) and at worst within the run. Printed: every
 //! run and both settle times.
 
